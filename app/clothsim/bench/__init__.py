@@ -1,0 +1,1 @@
+"""Benchmarks: speed, render, accuracy, stability, scaling."""

@@ -1,0 +1,62 @@
+"""``clothsim bench speed``: milliseconds per frame of every bundled scene, next to the plain
+vectorised-NumPy baseline timed in the same run."""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+from ..scene import bundled_scene_names, load_scene
+from ..sim import Simulation
+from .numpy_baseline import NumpyCloth
+
+
+def median_ms_per_frame(step, frames: int, repeats: int) -> float:  # noqa: ANN001
+    """Median over ``repeats`` of the mean milliseconds per frame of ``frames`` calls."""
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(frames):
+            step()
+        samples.append((time.perf_counter() - t0) / frames * 1e3)
+    return statistics.median(samples)
+
+
+def add_parser(bench_sub: argparse._SubParsersAction) -> None:
+    """Register ``clothsim bench speed``."""
+    p = bench_sub.add_parser("speed", help="ms per frame of each bundled scene vs a NumPy baseline")
+    p.add_argument("--frames", type=int, default=30, help="frames per repeat (default 30)")
+    p.add_argument("--repeats", type=int, default=7, help="repeats; the median is reported (default 7)")
+    p.add_argument("--warmup", type=int, default=60,
+                   help="frames simulated before timing, so the cloth is in motion (default 60)")
+    p.add_argument("--baseline-frames", type=int, default=3, help="frames per repeat of the NumPy baseline")
+    p.add_argument("--scenes", nargs="*", help="scene names or files (default: every bundled scene)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the table."""
+    names = args.scenes or bundled_scene_names()
+    print(f"{'scene':<15}{'self-coll.':>11}{'ms/frame':>10}{'substeps/s':>12}{'x realtime':>11}"
+          f"{'numpy ms':>10}{'speedup':>9}")
+    for name in names:
+        scene = load_scene(name)
+        for mode in ("off", "spec"):
+            sc = scene.with_simulation(self_collision=mode)
+            sim = Simulation(sc)
+            sim.step(args.warmup)
+            ms = median_ms_per_frame(sim.step, args.frames, args.repeats)
+            steps = sc.simulation.simulation_steps
+            realtime = (1e3 / sc.simulation.frames_per_sec) / ms
+            base = ""
+            ratio = ""
+            if mode == "off":
+                baseline = NumpyCloth(Simulation(sc))
+                baseline_ms = median_ms_per_frame(baseline.frame, args.baseline_frames, 3)
+                base = f"{baseline_ms:.1f}"
+                ratio = f"{baseline_ms / ms:.0f}x"
+            print(f"{name:<15}{mode:>11}{ms:>10.3f}{steps * 1e3 / ms:>12.0f}{realtime:>10.1f}x{base:>10}{ratio:>9}",
+                  flush=True)
+    print("medians of repeats; numpy = vectorised NumPy baseline of the same step without self-collision")
+    return 0

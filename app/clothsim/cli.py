@@ -1,0 +1,94 @@
+"""The ``clothsim`` command line: simulate, render, info and benchmarks."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from collections.abc import Sequence
+
+from . import __version__
+from .errors import ClothsimError
+
+EPILOG = """\
+scenes: a path to a course scene file (JSON with cloth/sphere/plane), or the name of a bundled
+scene: pinned2, pinned4, sphere, plane, selfCollision.
+
+examples:
+  clothsim simulate scenes/sphere.json --frames 180 --out sphere.npz
+  clothsim render sphere --shader phong -o sphere.png
+  clothsim bench speed
+"""
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:  # noqa: ANN001
+    print(f"clothsim: warning: {message}", file=sys.stderr)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser, with every subcommand registered."""
+    parser = argparse.ArgumentParser(
+        prog="clothsim",
+        description="Simulate and render mass-spring cloth from CS184-style scene files.",
+        epilog=EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"clothsim {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+
+    from .commands import add_simulate_parser
+
+    add_simulate_parser(sub)
+    bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling",
+                           description="Benchmarks that print figures measured on this machine.")
+    bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
+    bench.set_defaults(func=lambda args: (bench.print_help(), 2)[1])
+
+    from .bench.speed import add_parser as add_speed
+
+    add_speed(bench_sub)
+    _optional_commands(sub, bench_sub)
+    return parser
+
+
+def _optional_commands(sub: argparse._SubParsersAction, bench_sub: argparse._SubParsersAction) -> None:
+    """Register the renderer's and the analysis benchmarks' commands (none imports moderngl here)."""
+    try:
+        from .render.commands import add_parsers
+    except ImportError:
+        pass
+    else:
+        add_parsers(sub, bench_sub)
+    for module in ("accuracy", "stability", "scaling"):
+        try:
+            mod = __import__(f"clothsim.bench.{module}", fromlist=["add_parser"])
+        except ImportError:
+            continue
+        mod.add_parser(bench_sub)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the process exit code (2 for bad input, with a one-line message)."""
+    warnings.showwarning = _show_warning
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except ClothsimError as exc:
+        print(f"clothsim: error: {exc}", file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:
+        print("clothsim: interrupted", file=sys.stderr)
+        return 130
+    except MemoryError:
+        print("clothsim: error: out of memory", file=sys.stderr)
+        return 2
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

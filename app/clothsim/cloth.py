@@ -1,0 +1,140 @@
+"""The cloth grid as struct-of-arrays: point positions, pins, and springs of three families.
+
+Index convention (the spec's row-major order): point ``(x_index, y_index)`` is
+``y_index * num_width_points + x_index``. Springs are stored family by family and, inside a
+family, direction by direction in row-major order of their second end point; that order is also
+the order of the Gauss-Seidel passes (Provot), a choice the spec leaves open.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .scene import HORIZONTAL, ClothSpec
+
+STRUCTURAL = 0
+SHEARING = 1
+BENDING = 2
+FAMILY_NAMES = ("structural", "shearing", "bending")
+
+# (family, dx, dy): the spring joins point (x, y) to point (x - dx, y - dy); the spec's
+# "left", "above", "upper left", "upper right", "two left", "two above".
+SPRING_OFFSETS: tuple[tuple[int, int, int], ...] = (
+    (STRUCTURAL, 1, 0),
+    (STRUCTURAL, 0, 1),
+    (SHEARING, 1, 1),
+    (SHEARING, -1, 1),
+    (BENDING, 2, 0),
+    (BENDING, 0, 2),
+)
+
+# Bending springs are weaker: the spec suggests multiplying ks by 0.2.
+BENDING_STIFFNESS_FACTOR = 0.2
+
+
+@dataclass
+class Springs:
+    """Springs as parallel arrays; ``i``/``j`` are point indices, ``kind`` the family."""
+
+    i: np.ndarray  # (S,) int32
+    j: np.ndarray  # (S,) int32
+    rest: np.ndarray  # (S,) float64
+    kind: np.ndarray  # (S,) int8
+
+    def __len__(self) -> int:
+        return int(self.i.shape[0])
+
+    def select(self, mask: np.ndarray) -> "Springs":
+        """The springs where ``mask`` is true (copies, so the arrays are contiguous)."""
+        return Springs(self.i[mask], self.j[mask], self.rest[mask], self.kind[mask])
+
+
+def grid_positions(cloth: ClothSpec, seed: int) -> np.ndarray:
+    """Initial positions, shape (N, 3), float64.
+
+    Horizontal cloths lie in the plane y = 1 over x and z; vertical cloths span x and y with a
+    uniform z jitter in [-1/1000, 1/1000] drawn from a generator seeded by ``seed``.
+    """
+    nw, nh = cloth.num_width_points, cloth.num_height_points
+    u = np.linspace(0.0, cloth.width, nw)
+    v = np.linspace(0.0, cloth.height, nh)
+    uu, vv = np.meshgrid(u, v)  # (nh, nw): row y_index, column x_index
+    pos = np.empty((nh * nw, 3), dtype=np.float64)
+    pos[:, 0] = uu.ravel()
+    if cloth.orientation == HORIZONTAL:
+        pos[:, 1] = 1.0
+        pos[:, 2] = vv.ravel()
+    else:
+        rng = np.random.default_rng(seed)
+        pos[:, 1] = vv.ravel()
+        pos[:, 2] = rng.uniform(-1.0 / 1000.0, 1.0 / 1000.0, size=nh * nw)
+    return pos
+
+
+def pinned_mask(cloth: ClothSpec) -> np.ndarray:
+    """Boolean (N,) mask of pinned points."""
+    mask = np.zeros(cloth.num_points, dtype=np.bool_)
+    for x, y in cloth.pinned:
+        mask[y * cloth.num_width_points + x] = True
+    return mask
+
+
+def all_springs(nw: int, nh: int, positions: np.ndarray) -> Springs:
+    """Every spring of all three families, rest lengths measured from ``positions``."""
+    idx = np.arange(nw * nh, dtype=np.int32).reshape(nh, nw)
+    parts_i, parts_j, kinds = [], [], []
+    for family, dx, dy in SPRING_OFFSETS:
+        x0, x1 = max(dx, 0), nw + min(dx, 0)
+        a = idx[dy:, x0:x1]  # the point (x, y)
+        b = idx[: nh - dy, x0 - dx : x1 - dx]  # its partner (x - dx, y - dy)
+        parts_i.append(b.ravel())
+        parts_j.append(a.ravel())
+        kinds.append(np.full(a.size, family, dtype=np.int8))
+    i = np.concatenate(parts_i).astype(np.int32)
+    j = np.concatenate(parts_j).astype(np.int32)
+    rest = np.linalg.norm(positions[i] - positions[j], axis=1)
+    return Springs(i=i, j=j, rest=rest, kind=np.concatenate(kinds))
+
+
+def spring_blocks(nw: int, nh: int, structural: bool = True, shearing: bool = True,
+                  bending: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Block descriptors of the enabled springs, in the order :func:`all_springs` lists them.
+
+    Returns ``blocks`` (B, 6) int64 rows (dx, dy, x0, x1, first_spring, num_rows) and the family
+    of each block. Row r of a block holds the springs from point (x - dx, r) to (x, r + dy) for
+    x in [x0, x1), so both ends advance by one index per spring.
+    """
+    on = (structural, shearing, bending)
+    rows, fams = [], []
+    first = 0
+    for family, dx, dy in SPRING_OFFSETS:
+        if not on[family]:
+            continue
+        x0, x1 = max(dx, 0), nw + min(dx, 0)
+        n_rows = nh - dy
+        if x1 <= x0 or n_rows <= 0:
+            continue
+        rows.append((dx, dy, x0, x1, first, n_rows))
+        fams.append(family)
+        first += (x1 - x0) * n_rows
+    return np.array(rows, dtype=np.int64).reshape(-1, 6), np.array(fams, dtype=np.int8)
+
+
+def spring_count(nw: int, nh: int, structural: bool = True, shearing: bool = True, bending: bool = True) -> int:
+    """Closed-form number of springs on an nw x nh grid with the given families enabled."""
+    n = 0
+    if structural:
+        n += (nw - 1) * nh + nw * (nh - 1)
+    if shearing:
+        n += 2 * (nw - 1) * (nh - 1)
+    if bending:
+        n += max(nw - 2, 0) * nh + nw * max(nh - 2, 0)
+    return n
+
+
+def enabled_mask(kind: np.ndarray, structural: bool, shearing: bool, bending: bool) -> np.ndarray:
+    """Mask of springs whose family is enabled."""
+    on = np.array([structural, shearing, bending], dtype=np.bool_)
+    return on[kind]

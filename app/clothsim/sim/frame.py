@@ -1,0 +1,116 @@
+"""One frame = ``steps`` substeps in a single compiled call, in the spec's substep order:
+forces -> integrate -> self-collision -> colliders -> Provot.
+
+Passes a scene does not need are switched off by the caller (empty arrays, mode 0 or a
+negative limit) and never run. Colliders are tested against the cloth's bounding box first:
+a sphere the box does not reach, or a plane the box (of current and last positions) lies
+wholly on one side of, cannot act this substep and is skipped exactly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .jit import FASTMATH
+
+from .collide import collide_planes, collide_spheres
+from .constraints import provot
+from .forces import accumulate_forces
+from .integrate import verlet
+from .selfcollide import self_collide
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def free_bounds(pos: np.ndarray, last: np.ndarray, free: np.ndarray, box: np.ndarray) -> None:
+    """box = [min xyz, max xyz] over the current and last positions of the free points."""
+    for c in range(3):
+        box[c] = np.inf
+        box[3 + c] = -np.inf
+    for k in range(free.shape[0]):
+        p = free[k]
+        for c in range(3):
+            a = pos[c, p]
+            b = last[c, p]
+            lo = a if a < b else b
+            hi = a if a > b else b
+            if lo < box[c]:
+                box[c] = lo
+            if hi > box[3 + c]:
+                box[3 + c] = hi
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def reachable_colliders(box: np.ndarray, spheres: np.ndarray, planes: np.ndarray, sphere_on: np.ndarray,
+                        plane_on: np.ndarray) -> int:
+    """Mark which colliders the bounding box may touch; returns how many were ruled out."""
+    skipped = 0
+    for o in range(spheres.shape[0]):
+        d2 = 0.0
+        for c in range(3):
+            x = spheres[o, c]
+            if x < box[c]:
+                d2 += (box[c] - x) ** 2
+            elif x > box[3 + c]:
+                d2 += (x - box[3 + c]) ** 2
+        sphere_on[o] = d2 <= spheres[o, 3] ** 2
+        skipped += 0 if sphere_on[o] else 1
+    for o in range(planes.shape[0]):
+        lo = 0.0
+        hi = 0.0
+        for c in range(3):
+            n = planes[o, 3 + c]
+            a = (box[c] - planes[o, c]) * n
+            b = (box[3 + c] - planes[o, c]) * n
+            lo += a if a < b else b
+            hi += a if a > b else b
+        # every point strictly on the normal's side, or strictly behind: nothing can cross
+        plane_on[o] = not (lo > 0.0 or hi < 0.0)
+        skipped += 0 if plane_on[o] else 1
+    return skipped
+
+
+@njit(cache=True)
+def collide_reachable(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spheres: np.ndarray,
+                      planes: np.ndarray, offset: float, box: np.ndarray, sphere_on: np.ndarray,
+                      plane_on: np.ndarray) -> int:
+    """Collide with the colliders the cloth can reach; returns the number skipped."""
+    free_bounds(pos, last, free, box)
+    skipped = reachable_colliders(box, spheres, planes, sphere_on, plane_on)
+    for o in range(spheres.shape[0]):
+        if sphere_on[o]:
+            collide_spheres(pos, last, free, spheres[o : o + 1])
+    for o in range(planes.shape[0]):
+        if plane_on[o]:
+            collide_planes(pos, last, free, planes[o : o + 1], offset)
+    return skipped
+
+
+@njit(cache=True)
+def run_substeps(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarray, free: np.ndarray,
+                 pinned: np.ndarray, blocks: np.ndarray, block_k: np.ndarray, rest: np.ndarray, nw: int,
+                 tmp: np.ndarray, mass: float, gravity: np.ndarray, dt: float, keep: float, spheres: np.ndarray,
+                 planes: np.ndarray, offset: float, self_mode: int, thickness: float, sim_steps: int,
+                 cell: np.ndarray, keys: np.ndarray, slots: np.ndarray, start: np.ndarray,
+                 order: np.ndarray, stretch_limit: float, box: np.ndarray, sphere_on: np.ndarray,
+                 plane_on: np.ndarray) -> int:
+    """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
+
+    State arrays are (3, N); springs come as blocks (see :func:`clothsim.cloth.spring_blocks`).
+
+    ``self_mode`` 0 turns self-collision off; ``stretch_limit`` <= 0 turns Provot off.
+    """
+    inv_mass = 1.0 / mass
+    has_colliders = spheres.shape[0] + planes.shape[0] > 0
+    skipped = 0
+    for _ in range(steps):
+        accumulate_forces(pos, forces, blocks, block_k, rest, nw, mass, gravity, tmp)
+        verlet(pos, last, forces, free, inv_mass, dt, keep)
+        if self_mode != 0:
+            self_collide(pos, free, thickness, sim_steps, self_mode, cell[0], cell[1], cell[2], keys, slots,
+                         start, order)
+        if has_colliders:
+            skipped += collide_reachable(pos, last, free, spheres, planes, offset, box, sphere_on, plane_on)
+        if stretch_limit > 0.0:
+            provot(pos, pinned, blocks, rest, nw, stretch_limit)
+    return skipped

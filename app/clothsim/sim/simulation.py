@@ -1,0 +1,217 @@
+"""The :class:`Simulation`: cloth state as flat arrays plus the plan of passes a scene needs."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+from typing import Callable
+
+import numpy as np
+
+from ..cloth import (BENDING, BENDING_STIFFNESS_FACTOR, Springs, all_springs, enabled_mask, grid_positions,
+                     pinned_mask, spring_blocks)
+from ..errors import SimulationBlowUp
+from ..scene import Scene
+from .collide import SURFACE_OFFSET, collide_planes, collide_spheres
+from .constraints import provot
+from .forces import accumulate_forces
+from .frame import collide_reachable, run_substeps
+from .integrate import verlet
+from .selfcollide import MODE_GRID, MODE_SPEC, self_collide, table_size
+
+_SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID}
+
+
+class Simulation:
+    """A cloth scene being simulated.
+
+    ``positions`` and ``last_positions`` are (N, 3) float64 arrays updated in place (row-major:
+    index = row * num_width_points + col). Parameters the course GUI lets a user change between
+    frames are properties here (``ks``, ``density``, ``damping``, the ``enable_*`` flags,
+    ``gravity``, ``frames_per_sec``, ``simulation_steps``); setting one re-plans the passes.
+    """
+
+    def __init__(self, scene: Scene) -> None:
+        self.scene = scene
+        cloth = scene.cloth
+        self.nw = cloth.num_width_points
+        self.nh = cloth.num_height_points
+        n = self.nw * self.nh
+        self.initial_positions = grid_positions(cloth, scene.simulation.seed)
+        # Stored as (3, N) so the kernels stream each coordinate; users see (N, 3) views.
+        self._pos = np.ascontiguousarray(self.initial_positions.T)
+        self._last = self._pos.copy()
+        self._tmp = np.zeros((3, self.nw))
+        self.pinned = pinned_mask(cloth)
+        self.free = np.flatnonzero(~self.pinned).astype(np.int32)
+        self._all_springs = all_springs(self.nw, self.nh, self.initial_positions)
+        self._forces = np.zeros((3, n))
+        self._spheres = np.array([[*s.origin, s.radius, s.friction] for s in scene.spheres], dtype=np.float64).reshape(-1, 5)
+        self._planes = np.array([[*p.point, *p.normal, p.friction] for p in scene.planes], dtype=np.float64).reshape(-1, 7)
+        self._box = np.zeros(6)
+        self._sphere_on = np.zeros(len(self._spheres), dtype=np.bool_)
+        self._plane_on = np.zeros(len(self._planes), dtype=np.bool_)
+        m = table_size(n)
+        self._keys = np.zeros(n, dtype=np.int64)
+        self._slots = np.zeros(n, dtype=np.int64)
+        self._start = np.zeros(m + 1, dtype=np.int64)
+        self._order = np.zeros(n, dtype=np.int64)
+        self.frame = 0
+        self.colliders_skipped = 0
+        # Extra per-run state of the non-spec integrators (e.g. velocities); None = start afresh.
+        self.integrator_state: object = None
+        self._replan()
+
+    # ------------------------------------------------------------------------------------------
+    # Parameters (re-plan on change)
+
+    def _set_cloth(self, **changes: object) -> None:
+        self.scene = self.scene.with_cloth(**changes)
+        self._replan()
+
+    def _set_sim(self, **changes: object) -> None:
+        self.scene = self.scene.with_simulation(**changes)
+        self._replan()
+
+    ks = property(lambda self: self.scene.cloth.ks, lambda self, v: self._set_cloth(ks=float(v)),
+                  doc="Spring constant (N/m); bending springs use 0.2 * ks.")
+    density = property(lambda self: self.scene.cloth.density, lambda self, v: self._set_cloth(density=float(v)),
+                       doc="Area density (kg/m^2); mass per point = width*height*density/N.")
+    damping = property(lambda self: self.scene.cloth.damping, lambda self, v: self._set_cloth(damping=float(v)),
+                       doc="Damping in percent of velocity removed per substep.")
+    enable_structural = property(lambda self: self.scene.cloth.enable_structural,
+                                 lambda self, v: self._set_cloth(enable_structural=bool(v)))
+    enable_shearing = property(lambda self: self.scene.cloth.enable_shearing,
+                               lambda self, v: self._set_cloth(enable_shearing=bool(v)))
+    enable_bending = property(lambda self: self.scene.cloth.enable_bending,
+                              lambda self, v: self._set_cloth(enable_bending=bool(v)))
+    gravity = property(lambda self: self.scene.simulation.gravity,
+                       lambda self, v: self._set_sim(gravity=tuple(float(c) for c in v)),
+                       doc="External acceleration (m/s^2).")
+    frames_per_sec = property(lambda self: self.scene.simulation.frames_per_sec,
+                              lambda self, v: self._set_sim(frames_per_sec=float(v)))
+    simulation_steps = property(lambda self: self.scene.simulation.simulation_steps,
+                                lambda self, v: self._set_sim(simulation_steps=int(v)))
+
+    @property
+    def positions(self) -> np.ndarray:
+        """Current positions, (N, 3) float64: a view of the state, not a copy."""
+        return self._pos.T
+
+    @property
+    def last_positions(self) -> np.ndarray:
+        """Positions one substep earlier, (N, 3) float64 view."""
+        return self._last.T
+
+    @property
+    def dt(self) -> float:
+        """Substep length in seconds: 1 / (frames_per_sec * simulation_steps)."""
+        s = self.scene.simulation
+        return 1.0 / (s.frames_per_sec * s.simulation_steps)
+
+    @property
+    def mass(self) -> float:
+        """Mass of one point (kg)."""
+        c = self.scene.cloth
+        return c.width * c.height * c.density / c.num_points
+
+    def _replan(self) -> None:
+        """Derive the arrays the kernels see from the current parameters."""
+        cloth, sim = self.scene.cloth, self.scene.simulation
+        mask = enabled_mask(self._all_springs.kind, cloth.enable_structural, cloth.enable_shearing,
+                            cloth.enable_bending)
+        self.springs: Springs = self._all_springs.select(mask)
+        self._blocks, families = spring_blocks(self.nw, self.nh, cloth.enable_structural, cloth.enable_shearing,
+                                               cloth.enable_bending)
+        self._block_k = np.where(families == BENDING, cloth.ks * BENDING_STIFFNESS_FACTOR, cloth.ks)
+        self._gravity = np.asarray(sim.gravity, dtype=np.float64)
+        self._keep = 1.0 - cloth.damping / 100.0
+        self._self_mode = _SELF_MODES[sim.self_collision]
+        if sim.self_collision == "grid":
+            edge = 2.0 * cloth.thickness
+            self._cell = np.array([edge, edge, edge])
+        else:
+            w = 3.0 * cloth.width / cloth.num_width_points
+            h = 3.0 * cloth.height / cloth.num_height_points
+            self._cell = np.array([w, h, max(w, h)])
+        self._stretch_limit = -1.0 if sim.max_stretch is None else 1.0 + sim.max_stretch
+
+    # ------------------------------------------------------------------------------------------
+    # Stepping
+
+    def reset(self) -> None:
+        """Back to the initial state (same seed, so the same jitter)."""
+        self._pos[...] = self.initial_positions.T
+        self._last[...] = self.initial_positions.T
+        self.frame = 0
+        self.colliders_skipped = 0
+        self.integrator_state = None
+
+    def step(self, frames: int = 1) -> None:
+        """Advance ``frames`` frames of ``simulation_steps`` substeps each.
+
+        Raises :class:`SimulationBlowUp` (state restored to the start of the failing frame) when
+        a position becomes non-finite, naming the frame and the first bad substep.
+        """
+        for _ in range(int(frames)):
+            self._advance_frame()
+
+    def _substep_args(self) -> tuple:
+        return (self._pos, self._last, self._forces, self.free, self.pinned, self._blocks, self._block_k,
+                self.springs.rest, self.nw, self._tmp, self.mass, self._gravity, self.dt, self._keep,
+                self._spheres, self._planes, SURFACE_OFFSET, self._self_mode, self.scene.cloth.thickness,
+                self.scene.simulation.simulation_steps, self._cell, self._keys, self._slots, self._start,
+                self._order, self._stretch_limit, self._box, self._sphere_on, self._plane_on)
+
+    @property
+    def uses_spec_path(self) -> bool:
+        """True when the scene runs the spec's Verlet with per-substep damping (the fast path)."""
+        sim = self.scene.simulation
+        return sim.integrator == "verlet" and sim.damping_mode == "spec"
+
+    def _run(self, steps: int) -> None:
+        if self.uses_spec_path:
+            self.colliders_skipped += run_substeps(steps, *self._substep_args())
+        else:
+            from .integrators import advance
+
+            advance(self, steps)
+
+    def _advance_frame(self) -> None:
+        # Once per frame: a non-finite position or an exploding kinetic energy stops the run
+        # (cheap: one pass over the free points). The state is restored before raising.
+        from .guard import sim_blow_up_reason
+
+        state = self.integrator_state
+        saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy())
+        steps = self.scene.simulation.simulation_steps
+        self._run(steps)
+        if sim_blow_up_reason(self) is not None:
+            self._report_blow_up(saved, steps)
+        self.frame += 1
+
+    def _report_blow_up(self, saved: tuple, steps: int) -> None:
+        # Replay the frame one substep at a time (the run is deterministic) to name the substep.
+        from .guard import blow_up_advice, sim_blow_up_reason
+
+        def restore() -> None:
+            self._pos[...] = saved[0]
+            self._last[...] = saved[1]
+            self.integrator_state = None if saved[2] is None else saved[2].copy()
+
+        restore()
+        bad, what = steps, "positions became non-finite"
+        for sub in range(1, steps + 1):
+            self._run(1)
+            reason = sim_blow_up_reason(self)
+            if reason is not None:
+                bad, what = sub, reason
+                break
+        restore()
+        sim = self.scene.simulation
+        raise SimulationBlowUp(
+            f"simulation blew up at frame {self.frame + 1}, substep {bad}: {what} "
+            f"(integrator={sim.integrator}, ks={self.ks:g}, density={self.density:g}, {steps} substeps per frame); "
+            f"{blow_up_advice(self.scene)}"
+        )

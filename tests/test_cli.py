@@ -1,0 +1,137 @@
+"""The command line through a real subprocess: output files, and one-line errors for bad input."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from conftest import SCENES, run_cli
+
+GOOD = json.loads((SCENES / "sphere.json").read_text())
+
+
+def test_simulate_writes_the_state(tmp_path):
+    out = tmp_path / "state.npz"
+    r = run_cli("simulate", str(SCENES / "pinned4.json"), "--frames", "5", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    with np.load(out) as z:
+        assert z["positions"].shape == (2500, 3) and z["positions"].dtype == np.float64
+        assert z["last_positions"].shape == (2500, 3)
+        assert z["pinned"].sum() == 4
+        assert (int(z["frames"]), int(z["simulation_steps"]), int(z["seed"])) == (5, 30, 0)
+    assert not list(tmp_path.glob(".*tmp*"))
+
+
+def test_simulate_is_reproducible_through_the_cli(tmp_path):
+    outs = [tmp_path / "a.npz", tmp_path / "b.npz"]
+    for out in outs:
+        assert run_cli("simulate", "selfCollision", "--frames", "10", "--out", str(out)).returncode == 0
+    with np.load(outs[0]) as a, np.load(outs[1]) as b:
+        assert a["positions"].tobytes() == b["positions"].tobytes()
+
+
+def test_help_speaks_the_course_language():
+    r = run_cli("simulate", "--help")
+    assert r.returncode == 0
+    for word in ("--frames", "simulation_steps", "scene"):
+        assert word in r.stdout
+
+
+def test_unknown_key_is_a_one_line_warning(tmp_path):
+    scene = dict(GOOD, cloth=dict(GOOD["cloth"], color=[1, 0, 0]))
+    path = tmp_path / "extra.json"
+    path.write_text(json.dumps(scene))
+    r = run_cli("simulate", str(path), "--frames", "1", "--out", str(tmp_path / "s.npz"))
+    assert r.returncode == 0
+    assert "cloth.color" in r.stderr and "Traceback" not in r.stderr
+
+
+def cloth(**changes):
+    c = dict(GOOD["cloth"])
+    for k, v in changes.items():
+        if v is ...:
+            c.pop(k)
+        else:
+            c[k] = v
+    return dict(GOOD, cloth=c)
+
+
+BAD = {
+    "missing_field": (cloth(ks=...), "cloth.ks"),
+    "missing_cloth": ({"sphere": GOOD["sphere"]}, "cloth"),
+    "wrong_type": (cloth(num_width_points="fifty"), "cloth.num_width_points"),
+    "bool_as_number": (cloth(density=True), "cloth.density"),
+    "fractional_count": (cloth(num_height_points=10.5), "cloth.num_height_points"),
+    "nan": ('{"cloth": ' + json.dumps(GOOD["cloth"])[:-1] + ', "damping": NaN}}', "cloth.damping"),
+    "inf": ('{"cloth": ' + json.dumps(GOOD["cloth"])[:-1] + ', "ks": Infinity}}', "cloth.ks"),
+    "count_below_two": (cloth(num_width_points=1), "cloth.num_width_points"),
+    "zero_width": (cloth(width=0), "cloth.width"),
+    "negative_height": (cloth(height=-1), "cloth.height"),
+    "zero_thickness": (cloth(thickness=0.0), "cloth.thickness"),
+    "negative_density": (cloth(density=-150), "cloth.density"),
+    "zero_radius": (dict(GOOD, sphere=dict(GOOD["sphere"], radius=0)), "sphere.radius"),
+    "pin_out_of_range": (cloth(pinned=[[0, 0], [50, 3]]), "cloth.pinned[1][0]"),
+    "pin_not_pair": (cloth(pinned=[[0, 0, 0]]), "cloth.pinned[0]"),
+    "zero_normal": ({"cloth": GOOD["cloth"], "plane": {"point": [0, 0, 0], "normal": [0, 0, 0], "friction": 0.5}},
+                    "plane.normal"),
+    "short_vector": (dict(GOOD, sphere=dict(GOOD["sphere"], origin=[0.5, 0])), "sphere.origin"),
+    "unknown_orientation": (cloth(orientation=2), "cloth.orientation"),
+    "unknown_orientation_name": (cloth(orientation="diagonal"), "cloth.orientation"),
+    "truncated_json": (json.dumps(GOOD)[:40], "not valid JSON"),
+    "empty_file": ("", "empty"),
+    "top_level_list": ([1, 2], "top level"),
+    "unknown_top_level": (dict(GOOD, wind={"speed": 1}), "wind"),
+    "friction_above_one": (dict(GOOD, sphere=dict(GOOD["sphere"], friction=1.5)), "sphere.friction"),
+    "bad_steps": (dict(GOOD, simulation={"simulation_steps": 0}), "simulation.simulation_steps"),
+    "bad_self_collision": (dict(GOOD, simulation={"self_collision": "maybe"}), "simulation.self_collision"),
+    "sphere_list_item": (dict(GOOD, sphere=[GOOD["sphere"], {"origin": [0, 0, 0], "radius": 1}]),
+                         "sphere[1].friction"),
+    "grid_too_large": (cloth(num_width_points=1_000_000, num_height_points=1_000_000), "cloth.num_width_points"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_scene_gives_one_line_exit_2_and_no_file(tmp_path, case):
+    content, field = BAD[case]
+    path = tmp_path / "bad.json"
+    path.write_text(content if isinstance(content, str) else json.dumps(content))
+    out = tmp_path / "out.npz"
+    r = run_cli("simulate", str(path), "--frames", "1", "--out", str(out))
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    assert "Traceback" not in r.stderr
+    assert str(path) in lines[0] and field in lines[0], lines[0]
+    if case == "grid_too_large":
+        assert "would need" in lines[0] and "TiB" in lines[0]
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == [path]
+
+
+def test_missing_scene_file(tmp_path):
+    r = run_cli("simulate", str(tmp_path / "nope.json"), "--out", str(tmp_path / "o.npz"))
+    assert r.returncode == 2 and "no such scene file" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_bad_option_value(tmp_path):
+    r = run_cli("simulate", "sphere", "--frames", "2", "--out", str(tmp_path / "o.txt"))
+    assert r.returncode == 2 and "--out" in r.stderr
+
+
+def test_simulation_commands_do_not_load_egl(tmp_path):
+    # `simulate` must never create a GL context: libEGL stays out of the process.
+    code = ("import sys, clothsim.cli as c; rc = c.main(['simulate', 'pinned4', '--frames', '1', '--out', "
+            f"{str(tmp_path / 's.npz')!r}]); maps = open('/proc/self/maps').read(); "
+            "sys.exit(3 if 'libEGL' in maps or 'moderngl' in sys.modules else rc)")
+    import subprocess
+    import sys
+
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+
+
+def test_python_dash_m_and_version():
+    r = run_cli("--version")
+    assert r.returncode == 0 and "clothsim" in r.stdout
