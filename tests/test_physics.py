@@ -163,3 +163,33 @@ def test_positions_is_a_view_and_parameters_change_between_frames():
     assert sim.dt == pytest.approx(1 / 600)
     sim.step(5)
     assert np.isfinite(sim.positions).all()
+
+
+def test_grid_finds_pairs_straddling_cell_borders_that_the_spec_hash_misses():
+    # Pairs 0.5 * thickness apart placed across cell borders (x, y and z) of the spec's cells.
+    scene = load_scene("pinned4").with_cloth(num_width_points=2, num_height_points=4, pinned=(),
+                                            enable_structural=False, enable_shearing=False, enable_bending=False)
+    t = scene.cloth.thickness
+    gap = 0.5 * t
+    moved = {}
+    for mode in ("spec", "grid"):
+        sim = Simulation(scene.with_simulation(self_collision=mode, gravity=(0.0, 0.0, 0.0), simulation_steps=1))
+        w, h, d = sim._cell if mode == "spec" else Simulation(
+            scene.with_simulation(self_collision="spec"))._cell
+        pts = np.array([
+            [w * 3 - gap / 2, 0.5, 0.5], [w * 3 + gap / 2, 0.5, 0.5],      # across an x border
+            [0.2, h * 5 - gap / 2, 0.5], [0.2, h * 5 + gap / 2, 0.5],      # across a y border
+            [0.7, 0.3, d * 2 - gap / 2], [0.7, 0.3, d * 2 + gap / 2],      # across a z border
+            [0.9, 0.9, 0.9], [0.1, 0.1, 0.1],
+        ])
+        sim.positions[...] = pts
+        sim.last_positions[...] = pts
+        sim.step()
+        moved[mode] = np.linalg.norm(sim.positions - pts, axis=1)
+        gaps = np.linalg.norm(sim.positions[0:6:2] - sim.positions[1:6:2], axis=1)
+        if mode == "spec":
+            assert np.allclose(gaps, gap)  # the spec's same-cell hash never sees these pairs
+        else:
+            assert np.allclose(gaps, 2 * t)  # the 27-cell grid separates every one to 2*thickness
+    assert np.all(moved["spec"] == 0.0)
+    assert np.all(moved["grid"][6:] == 0.0)

@@ -1,0 +1,196 @@
+"""Mesh data: cloth triangles/uvs and per-frame normals/tangents, the UV sphere, the plane quad.
+
+The cloth's vertex stream is one float32 array of shape (N, 9): position, normal, tangent.
+It is refilled in place every frame by :func:`update_cloth_vertices` and uploaded as one VBO
+write. UVs and triangle indices never change, so they live in static buffers.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+CLOTH_FLOATS = 9  # position(3) normal(3) tangent(3)
+
+
+def cloth_triangles(nw: int, nh: int) -> np.ndarray:
+    """Triangle indices (T*3,) uint32, two per grid quad.
+
+    With A=(x,y), B=(x+1,y), C=(x,y+1), D=(x+1,y+1) the triangles are (A,C,B) and (B,C,D), so a
+    horizontal cloth's front face (counter-clockwise) points up (+y).
+    """
+    idx = np.arange(nw * nh, dtype=np.uint32).reshape(nh, nw)
+    a = idx[:-1, :-1].ravel()
+    b = idx[:-1, 1:].ravel()
+    c = idx[1:, :-1].ravel()
+    d = idx[1:, 1:].ravel()
+    tris = np.stack([a, c, b, b, c, d], axis=1)
+    return np.ascontiguousarray(tris.ravel())
+
+
+def cloth_uvs(nw: int, nh: int) -> np.ndarray:
+    """Texture coordinates (N, 2) float32: u along x_index, v along y_index, both in [0, 1]."""
+    u = np.linspace(0.0, 1.0, nw, dtype=np.float32)
+    v = np.linspace(0.0, 1.0, nh, dtype=np.float32)
+    uu, vv = np.meshgrid(u, v)
+    return np.ascontiguousarray(np.stack([uu.ravel(), vv.ravel()], axis=1))
+
+
+@njit(cache=True)
+def update_cloth_vertices(positions, nw, nh, with_tangents, out):  # pragma: no cover - compiled
+    """Fill ``out`` (N, 9) float32 with positions, unit normals and (optionally) unit tangents.
+
+    Normals are area-weighted: each triangle adds its unnormalised cross product (twice its
+    area times its unit normal) to its three corners. Tangents follow +u (the x_index
+    direction): each triangle adds dP/du weighted the same way, then Gram-Schmidt against n.
+    """
+    n_points = nw * nh
+    acc_n = np.zeros((n_points, 3))
+    acc_t = np.zeros((n_points, 3))
+    du = 1.0 / (nw - 1)
+    dv = 1.0 / (nh - 1)
+    tri = np.empty(3, dtype=np.int64)
+    for y in range(nh - 1):
+        for x in range(nw - 1):
+            a = y * nw + x
+            b = a + 1
+            c = a + nw
+            d = c + 1
+            for half in range(2):
+                if half == 0:
+                    tri[0] = a
+                    tri[1] = c
+                    tri[2] = b
+                else:
+                    tri[0] = b
+                    tri[1] = c
+                    tri[2] = d
+                i0, i1, i2 = tri[0], tri[1], tri[2]
+                e1x = positions[i1, 0] - positions[i0, 0]
+                e1y = positions[i1, 1] - positions[i0, 1]
+                e1z = positions[i1, 2] - positions[i0, 2]
+                e2x = positions[i2, 0] - positions[i0, 0]
+                e2y = positions[i2, 1] - positions[i0, 1]
+                e2z = positions[i2, 2] - positions[i0, 2]
+                nx = e1y * e2z - e1z * e2y
+                ny = e1z * e2x - e1x * e2z
+                nz = e1x * e2y - e1y * e2x
+                for k in range(3):
+                    v = tri[k]
+                    acc_n[v, 0] += nx
+                    acc_n[v, 1] += ny
+                    acc_n[v, 2] += nz
+                if with_tangents:
+                    # uv deltas of the edges: grid steps, so the inverse is closed-form.
+                    u0 = (i0 % nw) * du
+                    v0 = (i0 // nw) * dv
+                    s1 = (i1 % nw) * du - u0
+                    t1 = (i1 // nw) * dv - v0
+                    s2 = (i2 % nw) * du - u0
+                    t2 = (i2 // nw) * dv - v0
+                    det = s1 * t2 - s2 * t1
+                    if det != 0.0:
+                        # dP/du scaled by |det| (the uv area) so larger triangles weigh more.
+                        sgn = 1.0 if det > 0.0 else -1.0
+                        tx = (e1x * t2 - e2x * t1) * sgn
+                        ty = (e1y * t2 - e2y * t1) * sgn
+                        tz = (e1z * t2 - e2z * t1) * sgn
+                        for k in range(3):
+                            v = tri[k]
+                            acc_t[v, 0] += tx
+                            acc_t[v, 1] += ty
+                            acc_t[v, 2] += tz
+    for p in range(n_points):
+        out[p, 0] = positions[p, 0]
+        out[p, 1] = positions[p, 1]
+        out[p, 2] = positions[p, 2]
+        nx = acc_n[p, 0]
+        ny = acc_n[p, 1]
+        nz = acc_n[p, 2]
+        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
+        if ln > 0.0:
+            nx /= ln
+            ny /= ln
+            nz /= ln
+        else:
+            nx, ny, nz = 0.0, 1.0, 0.0
+        out[p, 3] = nx
+        out[p, 4] = ny
+        out[p, 5] = nz
+        if with_tangents:
+            tx = acc_t[p, 0]
+            ty = acc_t[p, 1]
+            tz = acc_t[p, 2]
+            dot = tx * nx + ty * ny + tz * nz
+            tx -= dot * nx
+            ty -= dot * ny
+            tz -= dot * nz
+            lt = math.sqrt(tx * tx + ty * ty + tz * tz)
+            if lt > 0.0:
+                tx /= lt
+                ty /= lt
+                tz /= lt
+            else:
+                tx, ty, tz = 1.0, 0.0, 0.0
+            out[p, 6] = tx
+            out[p, 7] = ty
+            out[p, 8] = tz
+        else:
+            out[p, 6] = 0.0
+            out[p, 7] = 0.0
+            out[p, 8] = 0.0
+
+
+def sphere_mesh(lat: int, lon: int) -> tuple[np.ndarray, np.ndarray]:
+    """A unit UV sphere: vertices (V, 11) float32 (position, normal, tangent, uv) and indices.
+
+    ``lat`` rings from pole to pole and ``lon`` segments around; the seam column is duplicated
+    so u runs 0..1 without wrapping. Front faces point outwards.
+    """
+    if lat < 2 or lon < 3:
+        raise ValueError("sphere resolution must be at least 2 x 3")
+    theta = np.linspace(0.0, math.pi, lat + 1)  # from +y (north) to -y
+    phi = np.linspace(0.0, 2.0 * math.pi, lon + 1)
+    th, ph = np.meshgrid(theta, phi, indexing="ij")  # (lat+1, lon+1)
+    st, ct, sp, cp = np.sin(th), np.cos(th), np.sin(ph), np.cos(ph)
+    pos = np.stack([st * sp, ct, st * cp], axis=-1)
+    # dP/dphi direction; at the poles use the limit so the tangent never vanishes.
+    tan = np.stack([cp, np.zeros_like(cp), -sp], axis=-1)
+    uv = np.stack([ph / (2.0 * math.pi), 1.0 - th / math.pi], axis=-1)
+    verts = np.concatenate([pos, pos, tan, uv], axis=-1).reshape(-1, 11).astype(np.float32)
+    idx = np.arange((lat + 1) * (lon + 1), dtype=np.uint32).reshape(lat + 1, lon + 1)
+    a = idx[:-1, :-1].ravel()
+    b = idx[:-1, 1:].ravel()
+    c = idx[1:, :-1].ravel()
+    d = idx[1:, 1:].ravel()
+    # Going down a ring increases theta and going right increases phi; (a, c, b) is CCW seen
+    # from outside.
+    tris = np.stack([a, c, b, b, c, d], axis=1).ravel()
+    return np.ascontiguousarray(verts), np.ascontiguousarray(tris.astype(np.uint32))
+
+
+def plane_mesh(point: tuple[float, float, float], normal: tuple[float, float, float],
+               half_extent: float = 2.0, uv_tiles: float = 4.0) -> tuple[np.ndarray, np.ndarray]:
+    """A square quad centred at ``point`` facing ``normal``: vertices (4, 11) float32, indices (6,).
+
+    The quad is large (the course draws its planes the same way) and its uv repeats
+    ``uv_tiles`` times so that textures keep a sensible scale.
+    """
+    n = np.asarray(normal, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    helper = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    t = np.cross(helper, n)
+    t /= np.linalg.norm(t)
+    b = np.cross(n, t)
+    p = np.asarray(point, dtype=np.float64)
+    corners = []
+    for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+        q = p + half_extent * (su * t + sv * b)
+        uv = ((su + 1) * 0.5 * uv_tiles, (sv + 1) * 0.5 * uv_tiles)
+        corners.append([*q, *n, *t, *uv])
+    verts = np.asarray(corners, dtype=np.float32)
+    # t x b = n, so (0, 1, 2) is counter-clockwise seen from the normal's side.
+    idx = np.array([0, 1, 2, 0, 2, 3], dtype=np.uint32)
+    return verts, idx

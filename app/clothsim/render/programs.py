@@ -1,0 +1,74 @@
+"""GLSL sources (glsl/*.vert, *.frag) -> compiled programs, one per look, compiled on first use."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+from ..errors import ClothsimError
+from ..resources import data_dir
+
+# look -> (vertex shader, fragment shader). Displacement and custom move vertices, so they
+# need their own vertex stage; the rest share one.
+LOOKS: dict[str, tuple[str, str]] = {
+    "wireframe": ("wireframe.vert", "wireframe.frag"),
+    "normal": ("mesh.vert", "normal.frag"),
+    "diffuse": ("mesh.vert", "diffuse.frag"),
+    "phong": ("mesh.vert", "phong.frag"),
+    "texture": ("mesh.vert", "texture.frag"),
+    "bump": ("mesh.vert", "bump.frag"),
+    "displacement": ("displacement.vert", "bump.frag"),
+    "mirror": ("mesh.vert", "mirror.frag"),
+    "custom": ("displacement.vert", "custom.frag"),
+}
+
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
+
+
+def read_source(name: str, glsl_dir: Path | None = None) -> str:
+    """A shader's text with ``#include "file"`` lines replaced by that file (one level)."""
+    root = glsl_dir or data_dir("glsl")
+    text = (root / name).read_text(encoding="utf-8")
+    return _INCLUDE.sub(lambda m: (root / m.group(1)).read_text(encoding="utf-8"), text)
+
+
+class Programs:
+    """Compiles and caches one program per look on a context.
+
+    ``sources`` can replace a look's (vertex, fragment) texts, which the tests use to check that
+    a broken shader is caught.
+    """
+
+    def __init__(self, ctx: Any, sources: dict[str, tuple[str, str]] | None = None) -> None:
+        self.ctx = ctx
+        self._sources = dict(sources or {})
+        self._cache: dict[str, Any] = {}
+
+    def get(self, look: str) -> Any:
+        """The compiled program of ``look``."""
+        prog = self._cache.get(look)
+        if prog is None:
+            vert, frag = self._sources.get(look) or tuple(read_source(n) for n in LOOKS[look])
+            try:
+                prog = self.ctx.program(vertex_shader=vert, fragment_shader=frag)
+            except Exception as exc:  # moderngl.Error carries the driver's compile log
+                first = " ".join(str(exc).split())[:300]
+                raise ClothsimError(f"shader '{look}' failed to compile: {first}") from None
+            self._cache[look] = prog
+        return prog
+
+    def release(self) -> None:
+        for prog in self._cache.values():
+            prog.release()
+        self._cache.clear()
+
+
+def set_uniform(prog: Any, name: str, value: Any) -> None:
+    """Set a uniform if the linked program kept it (unused uniforms are optimised away)."""
+    if name in prog:
+        u = prog[name]
+        if isinstance(value, (bytes, bytearray, memoryview)):
+            u.write(value)
+        else:
+            u.value = value

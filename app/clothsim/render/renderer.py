@@ -1,0 +1,372 @@
+"""The renderer: draws a simulation's current state with one look and reads the image back.
+
+Per frame it computes the cloth's normals (and tangents for the looks that need them) with a
+Numba kernel, writes them into ONE dynamic vertex buffer, draws cloth, spheres and planes into
+a multisampled framebuffer, resolves it and reads back RGB bytes. Everything else (programs,
+index buffers, sphere/plane meshes, textures) is built once and cached, so a Renderer is meant
+to be reused across frames and scenes.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..cloth import Springs
+from ..errors import ClothsimError
+from ..scene import Scene
+from . import mesh, textures
+from .camera import Camera, default_position, default_target
+from .context import create_context
+from .programs import Programs, set_uniform
+from .settings import (SHADERS, USES_COLOR_TEXTURE, USES_CUBEMAP, USES_HEIGHT_MAP, USES_TANGENTS,
+                       RenderSettings, srgb_to_linear)
+
+GL_SRGB8_ALPHA8 = 0x8C43
+# Texture units, fixed per sampler so that binding order never matters.
+UNIT_COLOR, UNIT_HEIGHT, UNIT_CUBE = 0, 1, 2
+# The course draws its sphere a little smaller than the collider so that the cloth, which
+# rests exactly on the collider's surface, is not pierced by the sphere's flat facets.
+SPHERE_DRAW_SCALE = 0.92
+FAMILY_COLORS = ((0.95, 0.35, 0.30), (0.35, 0.85, 0.45), (0.40, 0.60, 1.00))  # sRGB
+STAGES = ("mesh", "upload", "draw", "readback")
+
+
+class ClothState(Protocol):
+    """What the renderer reads from a simulation (``clothsim.Simulation`` has all of it)."""
+
+    scene: Scene
+    nw: int
+    nh: int
+    positions: np.ndarray  # (nw*nh, 3) float64, row-major
+    springs: Springs
+
+
+@dataclass
+class _ClothBuffers:
+    nw: int
+    nh: int
+    vertices: np.ndarray  # (N, 9) float32, refilled every frame
+    vbo: Any
+    uv_vbo: Any
+    tri_ibo: Any
+    tri_count: int
+
+
+class Renderer:
+    """Headless renderer of cloth scenes; ``render`` returns an (H, W, 3) uint8 sRGB image.
+
+    ``samples`` is the multisampling count (clamped to what the driver offers). ``sources``
+    replaces looks' GLSL texts ({look: (vertex, fragment)}), for experiments and tests.
+    Set ``profile`` to wait for the GPU after drawing, so that :attr:`timings` separates draw
+    from read-back (costs a little throughput).
+    """
+
+    def __init__(self, width: int = 800, height: int = 800, samples: int = 4, *,
+                 sources: dict[str, tuple[str, str]] | None = None, profile: bool = False) -> None:
+        if width < 1 or height < 1:
+            raise ClothsimError(f"image size must be positive, got {width}x{height}")
+        self.ctx = create_context()
+        self.width, self.height = int(width), int(height)
+        self.samples = max(1, min(int(samples), int(self.ctx.max_samples)))
+        self.profile = profile
+        size = (self.width, self.height)
+        self._ms_color = self.ctx.renderbuffer(size, 4, samples=self.samples)
+        self._ms_depth = self.ctx.depth_renderbuffer(size, samples=self.samples)
+        self._ms_fbo = self.ctx.framebuffer(self._ms_color, self._ms_depth)
+        self._color = self.ctx.renderbuffer(size, 4)
+        self._fbo = self.ctx.framebuffer(self._color)
+        self.programs = Programs(self.ctx, sources)
+        self._cloth: _ClothBuffers | None = None
+        self._springs: Springs | None = None
+        self._spring_ibo: Any = None
+        self._spring_ranges: list[tuple[int, int, int]] = []  # (family, first index, count)
+        self._spheres: dict[tuple[int, int], tuple[Any, Any, int]] = {}
+        self._planes: dict[tuple[Any, ...], tuple[Any, Any, int]] = {}
+        self._vaos: dict[tuple[Any, ...], Any] = {}
+        self._textures: dict[tuple[Any, ...], Any] = {}
+        self._settings_for: tuple[Scene | None, RenderSettings | None] = (None, None)
+        self.timings: dict[str, float] = dict.fromkeys(STAGES, 0.0)
+
+    # -- public --------------------------------------------------------------------------------
+    def render(self, simulation: ClothState, shader: str | None = None,
+               settings: RenderSettings | None = None) -> np.ndarray:
+        """Draw ``simulation``'s current state; returns a new (height, width, 3) uint8 array.
+
+        ``settings`` defaults to the scene's ``render`` object; ``shader`` overrides its look.
+        The image size is the renderer's, whatever ``settings.size`` says.
+        """
+        settings = settings or self.settings_for(simulation.scene)
+        look = shader or settings.shader
+        if look not in SHADERS:
+            raise ClothsimError(f"unknown shader {look!r} (expected one of: {', '.join(SHADERS)})")
+        t0 = time.perf_counter()
+        buffers = self._cloth_buffers(simulation.nw, simulation.nh)
+        mesh.update_cloth_vertices(np.ascontiguousarray(simulation.positions, dtype=np.float64),
+                                   simulation.nw, simulation.nh, look in USES_TANGENTS, buffers.vertices)
+        t1 = time.perf_counter()
+        buffers.vbo.write(buffers.vertices)
+        t2 = time.perf_counter()
+        self._draw(simulation, look, settings, buffers)
+        if self.profile:
+            self.ctx.finish()
+        t3 = time.perf_counter()
+        image = self._read()
+        t4 = time.perf_counter()
+        self.timings = {"mesh": t1 - t0, "upload": t2 - t1, "draw": t3 - t2, "readback": t4 - t3}
+        return image
+
+    def settings_for(self, scene: Scene) -> RenderSettings:
+        """The scene's render settings (validated once per scene object)."""
+        if self._settings_for[0] is not scene:
+            self._settings_for = (scene, RenderSettings.from_scene(scene))
+        settings = self._settings_for[1]
+        assert settings is not None
+        return settings
+
+    def camera(self, simulation: ClothState, settings: RenderSettings) -> Camera:
+        """The camera ``settings`` ask for; unset parts follow the course's defaults.
+
+        The default target is the cloth's current centroid, so a default camera tracks the
+        cloth; give ``camera_target`` for a fixed one.
+        """
+        scene = simulation.scene
+        if settings.camera_target is not None:
+            target = np.asarray(settings.camera_target, dtype=np.float64)
+        else:
+            target = default_target(simulation.positions)
+        if settings.camera_position is not None:
+            position = np.asarray(settings.camera_position, dtype=np.float64)
+        else:
+            position = default_position(target, scene.cloth.width, scene.cloth.height)
+        if np.allclose(position, target):
+            raise ClothsimError("camera position and target coincide")
+        return Camera(position, target, settings.fov, settings.near, settings.far)
+
+    def info(self) -> dict[str, str]:
+        """GL vendor, renderer, version and GLSL version of the context."""
+        from .context import describe
+
+        return describe(self.ctx)
+
+    def release(self) -> None:
+        """Free every GL object and the context."""
+        self.programs.release()
+        self.ctx.release()
+
+    def __enter__(self) -> "Renderer":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    # -- per-scene resources ---------------------------------------------------------------
+    def _cloth_buffers(self, nw: int, nh: int) -> _ClothBuffers:
+        b = self._cloth
+        if b is not None and (b.nw, b.nh) == (nw, nh):
+            return b
+        if b is not None:
+            for obj in (b.vbo, b.uv_vbo, b.tri_ibo):
+                obj.release()
+            self._drop_vaos("cloth")
+        vertices = np.zeros((nw * nh, mesh.CLOTH_FLOATS), dtype=np.float32)
+        tris = mesh.cloth_triangles(nw, nh)
+        self._cloth = _ClothBuffers(
+            nw=nw, nh=nh, vertices=vertices,
+            vbo=self.ctx.buffer(reserve=vertices.nbytes, dynamic=True),
+            uv_vbo=self.ctx.buffer(mesh.cloth_uvs(nw, nh)),
+            tri_ibo=self.ctx.buffer(tris),
+            tri_count=int(tris.size),
+        )
+        return self._cloth
+
+    def _spring_buffer(self, springs: Springs) -> None:
+        if self._springs is springs:
+            return
+        if self._spring_ibo is not None:
+            self._spring_ibo.release()
+            self._drop_vaos("springs")
+        order = np.argsort(springs.kind, kind="stable")
+        pairs = np.stack([springs.i[order], springs.j[order]], axis=1).astype(np.uint32)
+        # A GL buffer cannot be empty: a cloth with every family disabled gets a dummy index.
+        self._spring_ibo = self.ctx.buffer(pairs.tobytes() if len(springs) else b"\0\0\0\0")
+        counts = np.bincount(springs.kind.astype(np.int64), minlength=3)
+        first = 0
+        self._spring_ranges = []
+        for family in range(3):
+            n = int(counts[family]) * 2
+            if n:
+                self._spring_ranges.append((family, first, n))
+            first += n
+        self._springs = springs
+
+    def _sphere(self, resolution: tuple[int, int]) -> tuple[Any, Any, int]:
+        if resolution not in self._spheres:
+            verts, idx = mesh.sphere_mesh(*resolution)
+            self._spheres[resolution] = (self.ctx.buffer(verts), self.ctx.buffer(idx), int(idx.size))
+        return self._spheres[resolution]
+
+    def _plane(self, point: tuple[float, ...], normal: tuple[float, ...]) -> tuple[Any, Any, int]:
+        key = (tuple(point), tuple(normal))
+        if key not in self._planes:
+            verts, idx = mesh.plane_mesh(point, normal)  # type: ignore[arg-type]
+            self._planes[key] = (self.ctx.buffer(verts), self.ctx.buffer(idx), int(idx.size))
+        return self._planes[key]
+
+    def _drop_vaos(self, geometry: str) -> None:
+        for key in [k for k in self._vaos if k[1] == geometry]:
+            self._vaos.pop(key).release()
+
+    def _vao(self, look: str, geometry: str, key: Any, build: Any) -> Any:
+        full = (look, geometry, key)
+        vao = self._vaos.get(full)
+        if vao is None:
+            vao = build(self.programs.get(look))
+            self._vaos[full] = vao
+        return vao
+
+    # -- textures ----------------------------------------------------------------------------
+    def _color_texture(self, path: str | None) -> Any:
+        key = ("color", path)
+        if key not in self._textures:
+            img = textures.load_image(path) if path else textures.default_color_texture()
+            tex = self.ctx.texture((img.shape[1], img.shape[0]), 4, img.tobytes(),
+                                   internal_format=GL_SRGB8_ALPHA8)
+            tex.build_mipmaps()
+            self._textures[key] = tex
+        return self._textures[key]
+
+    def _height_texture(self, path: str | None) -> Any:
+        key = ("height", path)
+        if key not in self._textures:
+            img = textures.load_image(path, gray=True) if path else textures.default_height_map()
+            tex = self.ctx.texture((img.shape[1], img.shape[0]), 1, np.ascontiguousarray(img).tobytes())
+            # Bump mapping differences neighbouring texels of the full-size image (the course's
+            # formula), so no mipmaps: they would flatten the bumps at a distance.
+            self._textures[key] = tex
+        return self._textures[key]
+
+    def _cubemap(self, paths: tuple[str, ...] | None) -> Any:
+        key = ("cube", paths)
+        if key not in self._textures:
+            faces = textures.load_cubemap(paths) if paths else textures.default_cubemap()
+            size = faces[0].shape[0]
+            data = b"".join(f.tobytes() for f in faces)
+            tex = self.ctx.texture_cube((size, size), 4, data, internal_format=GL_SRGB8_ALPHA8)
+            tex.build_mipmaps()
+            self._textures[key] = tex
+        return self._textures[key]
+
+    # -- drawing -----------------------------------------------------------------------------
+    def _draw(self, sim: ClothState, look: str, settings: RenderSettings, buffers: _ClothBuffers) -> None:
+        import moderngl
+
+        ctx = self.ctx
+        self._ms_fbo.use()
+        ctx.viewport = (0, 0, self.width, self.height)
+        ctx.enable_only(moderngl.DEPTH_TEST)
+        ctx.wireframe = False
+        bg = settings.background
+        ctx.clear(bg[0], bg[1], bg[2], 1.0, depth=1.0)  # the framebuffer holds sRGB values
+
+        scene = sim.scene
+        cam = self.camera(sim, settings)
+        prog = self.programs.get(look)
+        self._set_common_uniforms(prog, look, cam, settings)
+        ident = np.eye(4)
+
+        if look == "wireframe":
+            self._draw_wireframe(prog, sim, settings, buffers)
+        else:
+            vao = self._vao(look, "cloth", None, lambda p: ctx.vertex_array(
+                p, [(buffers.vbo, "3f 3f 3f", "in_position", "in_normal", "in_tangent"),
+                    (buffers.uv_vbo, "2f", "in_uv")],
+                buffers.tri_ibo, index_element_size=4, skip_errors=True))
+            _set_matrix(prog, "u_model", ident)
+            vao.render(moderngl.TRIANGLES)
+
+        if look == "wireframe":
+            # Colliders as line meshes, dimmer than the cloth.
+            ctx.wireframe = True
+            dim = tuple(0.45 * c for c in srgb_to_linear(settings.color))
+            set_uniform(prog, "u_color", (*dim, 1.0))
+        for sphere in scene.spheres:
+            vbo, ibo, _ = self._sphere(settings.sphere_resolution)
+            vao = self._vao(look, "sphere", settings.sphere_resolution, lambda p: ctx.vertex_array(
+                p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
+                ibo, index_element_size=4, skip_errors=True))
+            model = np.diag([*(3 * [sphere.radius * SPHERE_DRAW_SCALE]), 1.0])
+            model[:3, 3] = sphere.origin
+            _set_matrix(prog, "u_model", model)
+            vao.render(moderngl.TRIANGLES)
+        if scene.planes:
+            # Cloth resting on a plane sits 0.0001 above it; push the plane back in depth so the
+            # two never fight for the same pixels.
+            ctx.polygon_offset = (1.0, 4.0)
+            _set_matrix(prog, "u_model", ident)
+            for plane in scene.planes:
+                vbo, ibo, _ = self._plane(plane.point, plane.normal)
+                vao = self._vao(look, "plane", (plane.point, plane.normal), lambda p: ctx.vertex_array(
+                    p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
+                    ibo, index_element_size=4, skip_errors=True))
+                vao.render(moderngl.TRIANGLES)
+            ctx.polygon_offset = (0.0, 0.0)
+        ctx.wireframe = False
+        ctx.copy_framebuffer(self._fbo, self._ms_fbo)  # resolves the multisampled image
+
+    def _draw_wireframe(self, prog: Any, sim: ClothState, settings: RenderSettings,
+                        buffers: _ClothBuffers) -> None:
+        import moderngl
+
+        self._spring_buffer(sim.springs)
+        vao = self._vao("wireframe", "springs", None, lambda p: self.ctx.vertex_array(
+            p, [(buffers.vbo, "3f 24x", "in_position")], self._spring_ibo, index_element_size=4))
+        _set_matrix(prog, "u_model", np.eye(4))
+        if settings.color_by_family:
+            for family, first, count in self._spring_ranges:
+                set_uniform(prog, "u_color", (*srgb_to_linear(FAMILY_COLORS[family]), 1.0))
+                vao.render(moderngl.LINES, vertices=count, first=first)
+        elif self._spring_ranges:
+            total = sum(c for _, _, c in self._spring_ranges)
+            vao.render(moderngl.LINES, vertices=total, first=0)
+
+    def _set_common_uniforms(self, prog: Any, look: str, cam: Camera, settings: RenderSettings) -> None:
+        _set_matrix(prog, "u_view_projection", cam.view_projection(self.width / self.height))
+        set_uniform(prog, "u_cam_pos", tuple(float(c) for c in cam.position))
+        set_uniform(prog, "u_light_pos", settings.light_position)
+        set_uniform(prog, "u_light_intensity", settings.light_intensity)
+        set_uniform(prog, "u_color", (*srgb_to_linear(settings.color), 1.0))
+        set_uniform(prog, "u_k_a", settings.k_a)
+        set_uniform(prog, "u_k_d", settings.k_d)
+        set_uniform(prog, "u_k_s", settings.k_s)
+        set_uniform(prog, "u_p", settings.p)
+        set_uniform(prog, "u_I_a", settings.I_a)
+        set_uniform(prog, "u_terms", tuple(1.0 if t in settings.terms else 0.0
+                                           for t in ("ambient", "diffuse", "specular")))
+        set_uniform(prog, "u_normal_scaling", settings.normal_scaling)
+        set_uniform(prog, "u_height_scaling", settings.height_scaling)
+        set_uniform(prog, "u_reflectivity", settings.reflectivity)
+        if look in USES_COLOR_TEXTURE:
+            self._color_texture(settings.color_texture).use(UNIT_COLOR)
+            set_uniform(prog, "u_texture_1", UNIT_COLOR)
+        if look in USES_HEIGHT_MAP:
+            tex = self._height_texture(settings.height_texture)
+            tex.use(UNIT_HEIGHT)
+            set_uniform(prog, "u_texture_2", UNIT_HEIGHT)
+            set_uniform(prog, "u_texture_2_size", (float(tex.width), float(tex.height)))
+        if look in USES_CUBEMAP:
+            self._cubemap(settings.cubemap).use(UNIT_CUBE)
+            set_uniform(prog, "u_texture_cubemap", UNIT_CUBE)
+
+    def _read(self) -> np.ndarray:
+        data = self._fbo.read(components=3, alignment=1)
+        img = np.frombuffer(data, dtype=np.uint8).reshape(self.height, self.width, 3)
+        return np.ascontiguousarray(img[::-1])  # GL's first row is the bottom one
+
+
+def _set_matrix(prog: Any, name: str, m: np.ndarray) -> None:
+    # NumPy matrices are row-major; GL reads uniforms column by column.
+    set_uniform(prog, name, np.ascontiguousarray(m.T, dtype=np.float32).tobytes())

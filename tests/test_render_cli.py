@@ -1,0 +1,110 @@
+"""The render CLI through a real subprocess, output formats, atomic output and error lines."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("moderngl")
+
+APP = Path(__file__).resolve().parents[1] / "app"
+
+
+def clothsim(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(APP), env.get("PYTHONPATH", "")) if p)
+    return subprocess.run([sys.executable, "-m", "clothsim", *args], capture_output=True, text=True,
+                          env=env, cwd=cwd, timeout=300)
+
+
+@pytest.fixture(scope="module")
+def egl_available():
+    from clothsim.errors import ClothsimError
+    from clothsim.render.context import create_context
+
+    try:
+        create_context().release()
+    except ClothsimError as exc:
+        pytest.skip(str(exc))
+
+
+def test_info(egl_available):
+    r = clothsim("info")
+    assert r.returncode == 0, r.stderr
+    assert "GL renderer:" in r.stdout and "GL version:" in r.stdout
+
+
+@pytest.mark.parametrize("name", ["out.png", "out.gif", "out.mp4", "frames/"])
+def test_render_formats(tmp_path, name, egl_available):
+    out = tmp_path / name
+    r = clothsim("render", "sphere", "--frames", "4", "--every", "2", "--size", "96x64",
+                 "--shader", "phong", "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    from PIL import Image
+
+    if name.endswith("/"):
+        files = sorted(out.iterdir())
+        assert [f.name for f in files] == ["frame_00000.png", "frame_00001.png", "frame_00002.png"]
+        assert Image.open(files[0]).size == (96, 64)
+    elif name.endswith(".mp4"):
+        assert out.stat().st_size > 0 and b"ftyp" in out.read_bytes()[:64]
+    else:
+        with Image.open(out) as im:
+            assert im.size == (96, 64)
+            if name.endswith(".gif"):
+                assert im.n_frames == 3
+            else:
+                assert np.asarray(im.convert("RGB")).std() > 1.0  # not a blank picture
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporaries left
+
+
+def test_failed_render_leaves_no_file(tmp_path, egl_available):
+    out = tmp_path / "odd.mp4"
+    r = clothsim("render", "sphere", "--frames", "1", "--size", "63x64", "-o", str(out))
+    assert r.returncode == 2
+    assert "even width and height" in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bad_render_setting_names_field(tmp_path):
+    scene = tmp_path / "s.json"
+    scene.write_text('{"cloth": {"width": 1, "height": 1, "num_width_points": 4, "num_height_points": 4,'
+                     ' "thickness": 0.01, "orientation": 0, "damping": 0.2, "density": 150, "ks": 5000},'
+                     ' "render": {"size": [0, 10]}}')
+    r = clothsim("render", str(scene), "-o", str(tmp_path / "x.png"))
+    assert r.returncode == 2
+    assert "render.size" in r.stderr and str(scene) in r.stderr
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_simulation_commands_do_not_load_gl():
+    code = ("import sys, clothsim.cli as c; c.build_parser(); import clothsim.render.commands; "
+            "print('moderngl' in sys.modules, 'glcontext' in sys.modules)")
+    env = dict(os.environ, PYTHONPATH=str(APP))
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["False", "False"]
+
+
+def test_missing_egl_gives_one_line(monkeypatch):
+    import moderngl
+
+    from clothsim.errors import ClothsimError
+    from clothsim.render import context
+
+    def no_egl(*args, **kwargs):
+        raise Exception("libEGL.so: cannot open shared object file:\n No such file or directory")
+
+    monkeypatch.setattr(moderngl, "create_standalone_context", no_egl)
+    with pytest.raises(ClothsimError) as info:
+        context.create_context()
+    message = str(info.value)
+    assert "\n" not in message
+    for package in ("libegl1", "libegl-mesa0", "libgl1-mesa-dri"):
+        assert package in message
