@@ -135,3 +135,37 @@ def test_simulation_commands_do_not_load_egl(tmp_path):
 def test_python_dash_m_and_version():
     r = run_cli("--version")
     assert r.returncode == 0 and "clothsim" in r.stdout
+
+
+def test_until_rest_stops_and_reports_the_frame(tmp_path):
+    out = tmp_path / "rest.npz"
+    r = run_cli("simulate", "pinned4", "--frames", "900", "--until-rest", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "at rest after frame" in r.stdout
+    with np.load(out) as z:
+        frames = int(z["frames"])
+    assert 30 < frames < 900
+    assert f"frame {frames}" in r.stdout
+
+
+def test_profile_lists_passes_and_what_was_skipped(tmp_path):
+    r = run_cli("simulate", "pinned4", "--frames", "3", "--profile", "--self-collision", "off",
+                "--out", str(tmp_path / "p.npz"))
+    assert r.returncode == 0, r.stderr
+    for name in ("forces", "integrate", "provot"):
+        assert name in r.stdout
+    assert "self-collision: simulation.self_collision is false" in r.stdout
+    assert "colliders: scene has no sphere or plane" in r.stdout
+    r = run_cli("simulate", "sphere", "--frames", "20", "--profile", "--out", str(tmp_path / "s.npz"))
+    assert "colliders" in r.stdout and "self-collision" in r.stdout and "bounding-box" in r.stdout
+
+
+def test_render_of_a_rested_cloth_reuses_its_image(tmp_path):
+    out = tmp_path / "rest.gif"
+    r = run_cli("render", "pinned4", "--frames", "600", "--every", "30", "--size", "64x64", "--profile",
+                "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    assert "at rest after frame" in r.stderr
+    reused = [line for line in r.stdout.splitlines() if line.startswith("reused")]
+    assert reused and int(reused[0].split()[1]) > 0
+    assert out.exists()

@@ -34,6 +34,11 @@ def add_parsers(sub: argparse._SubParsersAction, bench_sub: argparse._SubParsers
                    help=f"frames to simulate (default {DEFAULT_FRAMES}: one second at 90 frames/s)")
     p.add_argument("--every", type=int, metavar="K",
                    help="keep every K-th frame in an animation (default: 3 for .gif/.mp4, 1 for folders)")
+    p.add_argument("--no-rest", action="store_true",
+                   help="keep simulating a cloth that is at rest (by default, once no point moves more than "
+                        "simulation.rest_tolerance per frame for rest_frames frames, later frames reuse the image)")
+    p.add_argument("--profile", action="store_true",
+                   help="print where the time went: simulation, rendering, frames reused at rest")
     p.add_argument("--video-fps", type=float, metavar="F",
                    help="playback rate of .gif/.mp4 (default: the scene's frames_per_sec / K, real time)")
     p.add_argument("--size", metavar="WxH", help="image size in pixels (default: scene, else 800x800)")
@@ -183,24 +188,67 @@ def run_render(args: argparse.Namespace) -> int:
     from ..sim.simulation import Simulation
     from .renderer import Renderer
 
+    from ..sim.rest import RestDetector
+
     sim = Simulation(scene)
     renderer = Renderer(*settings.size, samples=settings.samples)
+    rest = None if args.no_rest else RestDetector(scene.simulation.rest_tolerance, scene.simulation.rest_frames)
+    if rest is not None:
+        rest.update(sim._pos)
+    timing = {"simulate": 0.0, "render": 0.0}
+    counts = {"simulated": 0, "rendered": 0, "reused": 0}
+    rested_at: int | None = None
+    image = None
+
+    def advance() -> None:
+        # A cloth at rest is not simulated any further: its state (and so its image) stays put.
+        nonlocal rested_at
+        if rested_at is not None:
+            return
+        t0 = time.perf_counter()
+        sim.step(1)
+        timing["simulate"] += time.perf_counter() - t0
+        counts["simulated"] += 1
+        if rest is not None and rest.update(sim._pos):
+            rested_at = sim.frame
+
+    def draw() -> Any:
+        nonlocal image
+        if image is not None and draw.frozen:
+            counts["reused"] += 1
+            return image
+        t0 = time.perf_counter()
+        image = renderer.render(sim, settings=settings)
+        timing["render"] += time.perf_counter() - t0
+        counts["rendered"] += 1
+        draw.frozen = rested_at is not None
+        return image
+
+    draw.frozen = False
     try:
         with output.open_output(args.output, fps) as sink, _progress(args.frames, settings.shader) as bar:
             if fmt == "png":
                 for _ in range(args.frames):
-                    sim.step(1)
+                    advance()
                     bar.update(1)
-                sink(renderer.render(sim, settings=settings))
+                sink(draw())
             else:
-                sink(renderer.render(sim, settings=settings))
-                for _ in range(args.frames):
-                    sim.step(1)
+                sink(draw())
+                for frame in range(1, args.frames + 1):
+                    advance()
                     bar.update(1)
-                    if sim.frame % every == 0:
-                        sink(renderer.render(sim, settings=settings))
+                    if frame % every == 0:
+                        sink(draw())
     finally:
         renderer.release()
+    if rested_at is not None:
+        print(f"cloth at rest after frame {rested_at}; later frames reuse its image", file=sys.stderr)
+    if args.profile:
+        total = sum(timing.values()) or 1e-12
+        print(f"{'part':<12}{'count':>8}{'total ms':>11}{'share':>8}")
+        print(f"{'simulate':<12}{counts['simulated']:>8}{timing['simulate'] * 1e3:>11.1f}{timing['simulate'] / total:>8.1%}")
+        print(f"{'render':<12}{counts['rendered']:>8}{timing['render'] * 1e3:>11.1f}{timing['render'] / total:>8.1%}")
+        print(f"{'reused':<12}{counts['reused']:>8}   frames at rest: neither simulated nor drawn")
     print(f"wrote {args.output}", file=sys.stderr)
     return 0
 
