@@ -35,6 +35,10 @@ def atomic_output(dest: str | Path, *, directory: bool = False) -> Iterator[Path
         else:
             tmp.unlink(missing_ok=True)
         raise
+    # mkstemp/mkdtemp create private files; give the result the usual permissions.
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, (0o777 if directory else 0o666) & ~umask)
     if directory and dest.is_dir():
         shutil.rmtree(dest)
     os.replace(tmp, dest)

@@ -44,27 +44,14 @@ def build_parser() -> argparse.ArgumentParser:
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
     bench.set_defaults(func=lambda args: (bench.print_help(), 2)[1])
 
-    from .bench.speed import add_parser as add_speed
+    from .bench import accuracy, scaling, speed, stability
+    from .render.commands import add_parsers as add_render_parsers
 
-    add_speed(bench_sub)
-    _optional_commands(sub, bench_sub)
+    speed.add_parser(bench_sub)
+    add_render_parsers(sub, bench_sub)
+    for module in (accuracy, stability, scaling):
+        module.add_parser(bench_sub)
     return parser
-
-
-def _optional_commands(sub: argparse._SubParsersAction, bench_sub: argparse._SubParsersAction) -> None:
-    """Register the renderer's and the analysis benchmarks' commands (none imports moderngl here)."""
-    try:
-        from .render.commands import add_parsers
-    except ImportError:
-        pass
-    else:
-        add_parsers(sub, bench_sub)
-    for module in ("accuracy", "stability", "scaling"):
-        try:
-            mod = __import__(f"clothsim.bench.{module}", fromlist=["add_parser"])
-        except ImportError:
-            continue
-        mod.add_parser(bench_sub)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

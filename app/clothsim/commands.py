@@ -52,10 +52,8 @@ def apply_overrides(scene: Scene, args: argparse.Namespace) -> Scene:
 
 
 def _stability_check(scene: Scene, auto: bool) -> Scene:
-    try:
-        from .sim import guard
-    except ImportError:
-        return scene
+    from .sim import guard
+
     if auto:
         steps = guard.estimate_stable_substeps(scene)
         if steps is not None:

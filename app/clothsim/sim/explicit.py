@@ -1,0 +1,97 @@
+"""Explicit integrators other than the spec path: Verlet with rate damping, symplectic Euler.
+
+Rate damping solves x'' = F/m - c x' with f = exp(-c dt) per substep. For Verlet the velocity
+term is scaled by f and the force term by phi = (1 - f)/(c dt), which keeps the scheme second
+order (at c = 0, phi = 1 and f = 1: plain Verlet). Symplectic Euler (kick, then drift) keeps an
+explicit velocity; with no half-step start term it is globally first order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .forces import accumulate_forces
+from .jit import FASTMATH
+from .passes import corrections
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def verlet_start(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray, free: np.ndarray,
+                 inv_mass: float, dt: float, c: float) -> None:
+    """Second-order start: last = x0 - v0*dt + a0*dt^2/2 with a0 = F/m - c*v0 (free points)."""
+    for ax in range(3):
+        for k in range(free.shape[0]):
+            p = free[k]
+            a0 = forces[ax, p] * inv_mass - c * vel[ax, p]
+            last[ax, p] = pos[ax, p] - vel[ax, p] * dt + 0.5 * a0 * dt * dt
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def verlet_rate_step(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, free: np.ndarray, inv_mass: float,
+                     dt: float, f: float, phi: float) -> None:
+    """x' = x + f*(x - x_last) + phi*a*dt^2 for free points; last <- x."""
+    h2 = dt * dt * inv_mass * phi
+    for ax in range(3):
+        x = pos[ax]
+        xl = last[ax]
+        fa = forces[ax]
+        for k in range(free.shape[0]):
+            p = free[k]
+            cur = x[p]
+            x[p] = cur + f * (cur - xl[p]) + fa[p] * h2
+            xl[p] = cur
+
+
+@njit(cache=True)
+def run_verlet_rate(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarray, free: np.ndarray,
+                    blocks: np.ndarray, block_k: np.ndarray, rest: np.ndarray, nw: int, tmp: np.ndarray,
+                    mass: float, gravity: np.ndarray, dt: float, f: float, phi: float, post: tuple) -> int:
+    """``steps`` substeps of rate-damped Verlet plus the shared corrections; returns colliders skipped."""
+    skipped = 0
+    for _ in range(steps):
+        accumulate_forces(pos, forces, blocks, block_k, rest, nw, mass, gravity, tmp)
+        verlet_rate_step(pos, last, forces, free, 1.0 / mass, dt, f, phi)
+        skipped += corrections(pos, last, free, blocks, rest, nw, post)
+    return skipped
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def symplectic_step(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray, free: np.ndarray,
+                    inv_mass: float, dt: float, f: float, phi: float) -> None:
+    """Kick v <- f*v + phi*dt*F/m, then drift x <- x + dt*v; last <- x (free points)."""
+    h = dt * inv_mass * phi
+    for ax in range(3):
+        for k in range(free.shape[0]):
+            p = free[k]
+            v = f * vel[ax, p] + forces[ax, p] * h
+            vel[ax, p] = v
+            last[ax, p] = pos[ax, p]
+            pos[ax, p] += dt * v
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def velocities_from_positions(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, free: np.ndarray,
+                              dt: float) -> None:
+    """v = (x - x_last)/dt, so that collision and Provot corrections also change the velocity."""
+    inv = 1.0 / dt
+    for ax in range(3):
+        for k in range(free.shape[0]):
+            p = free[k]
+            vel[ax, p] = (pos[ax, p] - last[ax, p]) * inv
+
+
+@njit(cache=True)
+def run_symplectic(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray,
+                   free: np.ndarray, blocks: np.ndarray, block_k: np.ndarray, rest: np.ndarray, nw: int,
+                   tmp: np.ndarray, mass: float, gravity: np.ndarray, dt: float, f: float, phi: float,
+                   post: tuple, fix_velocity: bool) -> int:
+    """``steps`` substeps of symplectic Euler plus the shared corrections; returns colliders skipped."""
+    skipped = 0
+    for _ in range(steps):
+        accumulate_forces(pos, forces, blocks, block_k, rest, nw, mass, gravity, tmp)
+        symplectic_step(pos, last, vel, forces, free, 1.0 / mass, dt, f, phi)
+        skipped += corrections(pos, last, free, blocks, rest, nw, post)
+        if fix_velocity:
+            velocities_from_positions(pos, last, vel, free, dt)
+    return skipped

@@ -1,0 +1,117 @@
+"""Stability guard: the explicit step bound before a run, blow-up detection during it.
+
+Before stepping, the highest angular frequency of the spring network is bounded by Gershgorin's
+theorem: each row of M^-1 K sums to at most 2 * (sum of the stiffnesses of the springs at that
+point) / m, so omega_max^2 <= 2 max_p(sum_k) / m. Verlet and symplectic Euler are stable for
+dt < 2 / omega_max (undamped leapfrog bound; damping only widens it). Since Gershgorin
+over-estimates omega_max the bound is on the safe side.
+
+During a run a frame has blown up when a position is non-finite or when the kinetic energy of the
+free points exceeds ENERGY_FACTOR times the work gravity has done on them plus a small slack
+(see :func:`blow_up_reason`): an unstable explicit run passes that within a few frames, even
+when Provot's limit keeps its positions bounded.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from ..cloth import BENDING, BENDING_STIFFNESS_FACTOR, all_springs, enabled_mask, grid_positions, pinned_mask
+from ..scene import Scene
+
+EXPLICIT_INTEGRATORS = ("verlet", "symplectic_euler")
+
+# A frame has blown up when the free points' kinetic energy per kg exceeds
+# ENERGY_FACTOR x (work done by gravity per kg) + ENERGY_SLACK (J/kg; 2 J/kg = 2 m/s RMS).
+ENERGY_FACTOR = 4.0
+ENERGY_SLACK = 2.0
+
+
+def omega_max(scene: Scene) -> float:
+    """Gershgorin bound on the highest angular frequency (rad/s) of the free points' springs."""
+    cloth = scene.cloth
+    pos = grid_positions(cloth, scene.simulation.seed)
+    springs = all_springs(cloth.num_width_points, cloth.num_height_points, pos)
+    springs = springs.select(enabled_mask(springs.kind, cloth.enable_structural, cloth.enable_shearing,
+                                          cloth.enable_bending))
+    k = np.where(springs.kind == BENDING, cloth.ks * BENDING_STIFFNESS_FACTOR, cloth.ks)
+    total = np.bincount(springs.i, weights=k, minlength=cloth.num_points)
+    total += np.bincount(springs.j, weights=k, minlength=cloth.num_points)
+    free = ~pinned_mask(cloth)
+    if not free.any():
+        return 0.0
+    mass = cloth.width * cloth.height * cloth.density / cloth.num_points
+    return math.sqrt(2.0 * float(total[free].max()) / mass)
+
+
+def stable_dt(scene: Scene) -> float:
+    """Largest substep (s) the explicit integrators are predicted to be stable at (inf if no springs)."""
+    w = omega_max(scene)
+    return math.inf if w == 0.0 else 2.0 / w
+
+
+def substeps_for_dt(scene: Scene, dt: float) -> int:
+    """Smallest substep count per frame with a substep no longer than ``dt``."""
+    if math.isinf(dt):
+        return 1
+    # tiny slack so that an exact multiple does not round up through floating-point noise
+    return max(1, math.ceil(1.0 / (scene.simulation.frames_per_sec * dt) * (1.0 - 1e-12)))
+
+
+def estimate_stable_substeps(scene: Scene) -> int | None:
+    """Smallest stable ``simulation_steps`` for the scene's explicit integrator; None for implicit/xpbd."""
+    if scene.simulation.integrator not in EXPLICIT_INTEGRATORS:
+        return None
+    return substeps_for_dt(scene, stable_dt(scene))
+
+
+def stability_warning(scene: Scene) -> str | None:
+    """A one-line warning when the scene's explicit step is beyond the stable bound, else None."""
+    need = estimate_stable_substeps(scene)
+    steps = scene.simulation.simulation_steps
+    if need is None or steps >= need:
+        return None
+    dt = 1.0 / (scene.simulation.frames_per_sec * steps)
+    return (f"{scene.path}: {scene.simulation.integrator} is likely unstable at {steps} substeps per frame "
+            f"(dt={dt:.3g} s > 2/omega_max={stable_dt(scene):.3g} s for ks={scene.cloth.ks:g}, "
+            f"density={scene.cloth.density:g}); use simulation_steps >= {need} (or --auto-substeps), "
+            "or integrator implicit_euler or xpbd")
+
+
+def blow_up_reason(pos: np.ndarray, last: np.ndarray, free: np.ndarray, dt: float, gravity: np.ndarray,
+                   start: np.ndarray) -> str | None:
+    """What blew up, or None. ``pos``/``last``/``start`` are (3, N), ``start`` the initial positions.
+
+    Energy test: rest lengths are measured from the initial grid, so the cloth starts with no
+    elastic energy and (static colliders and damping only remove energy) its kinetic energy can
+    only come from the work gravity has done, g . (drop of the free points' centre of mass).
+    """
+    if not np.isfinite(pos).all():
+        return "positions became non-finite"
+    n = free.shape[0]
+    if n == 0:
+        return None
+    d = pos[:, free] - last[:, free]
+    ke = 0.5 * float(np.einsum("ij,ij->", d, d)) / (n * dt * dt)
+    work = float(gravity @ (pos[:, free].mean(axis=1) - start[:, free].mean(axis=1)))
+    bound = ENERGY_FACTOR * max(work, 0.0) + ENERGY_SLACK
+    if not ke <= bound:
+        return (f"kinetic energy blew up ({ke:.3g} J/kg > bound {bound:.3g} J/kg = "
+                f"{ENERGY_FACTOR:g} x gravity work + {ENERGY_SLACK:g})")
+    return None
+
+
+def sim_blow_up_reason(sim: Any) -> str | None:
+    """:func:`blow_up_reason` for a :class:`~clothsim.sim.simulation.Simulation`."""
+    return blow_up_reason(sim._pos, sim._last, sim.free, sim.dt, sim._gravity, sim.initial_positions.T)
+
+
+def blow_up_advice(scene: Scene) -> str:
+    """What to try after a blow-up."""
+    need = estimate_stable_substeps(scene)
+    if need is not None and need > scene.simulation.simulation_steps:
+        return f"try simulation_steps >= {need}, or integrator implicit_euler or xpbd"
+    return "try more simulation_steps, or integrator implicit_euler or xpbd"

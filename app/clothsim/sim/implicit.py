@@ -1,0 +1,186 @@
+"""Backward Euler linearised once per substep (Baraff & Witkin style), solved matrix-free.
+
+Per substep: (M (1 + c dt) + dt^2 K) dv = dt (F(x0) - c M v0 - dt K v0), v1 = v0 + dv,
+x1 = x0 + dt v1, with K = -dF/dx assembled per spring as 3x3 blocks
+Ks = k (d d^T + max(0, 1 - L/l) (I - d d^T)). The compressive part of the transverse term is
+dropped (clamped at 0) so the matrix stays symmetric positive definite and conjugate gradient
+applies. Pinned points are removed by masking (their dv is 0). Jacobi preconditioner.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .jit import FASTMATH
+from .explicit import velocities_from_positions
+from .forces import accumulate_forces
+from .passes import corrections
+
+# Relative residual at which CG stops, and its iteration cap (a stiff run hitting the cap is
+# still damped, not unstable: the partial solve is a descent step of the SPD system).
+CG_TOLERANCE = 1e-9
+CG_MAX_ITERATIONS = 400
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def spring_jacobians(pos: np.ndarray, si: np.ndarray, sj: np.ndarray, rest: np.ndarray, kspr: np.ndarray,
+                     jac: np.ndarray) -> None:
+    """jac (6, S) = the symmetric blocks Ks as (xx, yy, zz, xy, xz, yz)."""
+    for s in range(si.shape[0]):
+        a = si[s]
+        b = sj[s]
+        ex = pos[0, b] - pos[0, a]
+        ey = pos[1, b] - pos[1, a]
+        ez = pos[2, b] - pos[2, a]
+        ln = np.sqrt(ex * ex + ey * ey + ez * ez)
+        if not ln > 0.0:
+            for q in range(6):
+                jac[q, s] = 0.0
+            continue
+        dx = ex / ln
+        dy = ey / ln
+        dz = ez / ln
+        t = 1.0 - rest[s] / ln
+        if t < 0.0:
+            t = 0.0
+        k = kspr[s]
+        u = k * (1.0 - t)
+        w = k * t
+        jac[0, s] = u * dx * dx + w
+        jac[1, s] = u * dy * dy + w
+        jac[2, s] = u * dz * dz + w
+        jac[3, s] = u * dx * dy
+        jac[4, s] = u * dx * dz
+        jac[5, s] = u * dy * dz
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def apply_stiffness(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
+    """out = K y for the assembled spring blocks (K positive semidefinite)."""
+    out[:, :] = 0.0
+    for s in range(si.shape[0]):
+        a = si[s]
+        b = sj[s]
+        rx = y[0, a] - y[0, b]
+        ry = y[1, a] - y[1, b]
+        rz = y[2, a] - y[2, b]
+        gx = jac[0, s] * rx + jac[3, s] * ry + jac[4, s] * rz
+        gy = jac[3, s] * rx + jac[1, s] * ry + jac[5, s] * rz
+        gz = jac[4, s] * rx + jac[5, s] * ry + jac[2, s] * rz
+        out[0, a] += gx
+        out[1, a] += gy
+        out[2, a] += gz
+        out[0, b] -= gx
+        out[1, b] -= gy
+        out[2, b] -= gz
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def _dot(x: np.ndarray, y: np.ndarray) -> float:
+    acc = 0.0
+    for ax in range(3):
+        for p in range(x.shape[1]):
+            acc += x[ax, p] * y[ax, p]
+    return acc
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def solve_velocity_change(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, mask: np.ndarray, b: np.ndarray,
+                          diag: np.ndarray, m_eff: float, h2: float, dv: np.ndarray, r: np.ndarray,
+                          z: np.ndarray, p: np.ndarray, ap: np.ndarray, tol: float, max_iter: int) -> int:
+    """Preconditioned CG for (m_eff I + h2 K) dv = b on the free points; returns iterations used."""
+    n = b.shape[1]
+    dv[:, :] = 0.0
+    bb = _dot(b, b)
+    if bb == 0.0 or not np.isfinite(bb):
+        return 0
+    for ax in range(3):
+        for q in range(n):
+            r[ax, q] = b[ax, q]
+            z[ax, q] = r[ax, q] / diag[ax, q]
+            p[ax, q] = z[ax, q]
+    rz = _dot(r, z)
+    limit = tol * tol * bb
+    it = 0
+    while it < max_iter:
+        it += 1
+        apply_stiffness(jac, si, sj, p, ap)
+        for ax in range(3):
+            for q in range(n):
+                ap[ax, q] = (m_eff * p[ax, q] + h2 * ap[ax, q]) * mask[q]
+        pap = _dot(p, ap)
+        if not pap > 0.0:
+            break
+        alpha = rz / pap
+        for ax in range(3):
+            for q in range(n):
+                dv[ax, q] += alpha * p[ax, q]
+                r[ax, q] -= alpha * ap[ax, q]
+        if _dot(r, r) <= limit:
+            break
+        for ax in range(3):
+            for q in range(n):
+                z[ax, q] = r[ax, q] / diag[ax, q]
+        rz_new = _dot(r, z)
+        beta = rz_new / rz
+        rz = rz_new
+        for ax in range(3):
+            for q in range(n):
+                p[ax, q] = z[ax, q] + beta * p[ax, q]
+    return it
+
+
+@njit(cache=True, fastmath=FASTMATH)
+def implicit_update(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray, free: np.ndarray,
+                    mask: np.ndarray, si: np.ndarray, sj: np.ndarray, rest: np.ndarray, kspr: np.ndarray,
+                    jac: np.ndarray, scratch: np.ndarray, mass: float, dt: float, c: float, keep_after: float,
+                    tol: float, max_iter: int) -> int:
+    """One linearised backward-Euler update of velocities and positions (free points only).
+
+    ``scratch`` is (7, 3, N): b, diag, dv, r, z, p, Ap. Returns the CG iterations used.
+    """
+    b = scratch[0]
+    diag = scratch[1]
+    dv = scratch[2]
+    n = pos.shape[1]
+    spring_jacobians(pos, si, sj, rest, kspr, jac)
+    m_eff = mass * (1.0 + c * dt)
+    h2 = dt * dt
+    apply_stiffness(jac, si, sj, vel, scratch[6])
+    for ax in range(3):
+        for q in range(n):
+            b[ax, q] = dt * (forces[ax, q] - c * mass * vel[ax, q] - dt * scratch[6][ax, q]) * mask[q]
+            diag[ax, q] = m_eff
+    for s in range(si.shape[0]):
+        for ax in range(3):
+            diag[ax, si[s]] += h2 * jac[ax, s]
+            diag[ax, sj[s]] += h2 * jac[ax, s]
+    its = solve_velocity_change(jac, si, sj, mask, b, diag, m_eff, h2, dv, scratch[3], scratch[4], scratch[5],
+                                scratch[6], tol, max_iter)
+    for ax in range(3):
+        for k in range(free.shape[0]):
+            q = free[k]
+            v = (vel[ax, q] + dv[ax, q]) * keep_after
+            vel[ax, q] = v
+            last[ax, q] = pos[ax, q]
+            pos[ax, q] += dt * v
+    return its
+
+
+@njit(cache=True)
+def run_implicit(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray,
+                 free: np.ndarray, mask: np.ndarray, blocks: np.ndarray, block_k: np.ndarray, rest: np.ndarray,
+                 nw: int, tmp: np.ndarray, si: np.ndarray, sj: np.ndarray, kspr: np.ndarray, jac: np.ndarray,
+                 scratch: np.ndarray, mass: float, gravity: np.ndarray, dt: float, c: float, keep_after: float,
+                 tol: float, max_iter: int, post: tuple, fix_velocity: bool) -> int:
+    """``steps`` implicit substeps plus the shared corrections; returns total CG iterations."""
+    total = 0
+    for _ in range(steps):
+        accumulate_forces(pos, forces, blocks, block_k, rest, nw, mass, gravity, tmp)
+        total += implicit_update(pos, last, vel, forces, free, mask, si, sj, rest, kspr, jac, scratch, mass, dt,
+                                 c, keep_after, tol, max_iter)
+        corrections(pos, last, free, blocks, rest, nw, post)
+        if fix_velocity:
+            velocities_from_positions(pos, last, vel, free, dt)
+    return total

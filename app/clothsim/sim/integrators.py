@@ -1,0 +1,148 @@
+"""Every run other than the spec fast path: integrator and damping mode chosen per scene.
+
+``advance(sim, steps)`` runs ``steps`` substeps in the spec's order (forces -> integrate ->
+self-collision -> colliders -> Provot) with the integrator of ``sim.scene.simulation``:
+
+* ``verlet``: position Verlet; reached here only with ``damping_mode == "rate"``, where it gets
+  the second-order start and the consistent damping discretisation (see :mod:`.explicit`).
+* ``symplectic_euler``: kick-drift with an explicit velocity (first order).
+* ``implicit_euler``: linearised backward Euler, CG solve (see :mod:`.implicit`).
+* ``xpbd``: compliant distance constraints (see :mod:`.xpbd`).
+
+Extra per-run state lives in ``sim.integrator_state`` (an :class:`IntegratorState`), created on
+first use from the current positions: the starting velocity is (x - x_last)/dt, zero at reset.
+``sim._last`` keeps meaning "position before the last substep" for every integrator, because
+the collision kernels move points relative to it.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import Any
+
+import numpy as np
+
+from ..cloth import BENDING, BENDING_STIFFNESS_FACTOR
+from .collide import SURFACE_OFFSET
+from .explicit import run_symplectic, run_verlet_rate, verlet_start
+from .forces import accumulate_forces
+from .implicit import CG_MAX_ITERATIONS, CG_TOLERANCE, run_implicit
+from .passes import has_corrections
+from .xpbd import XPBD_ITERATIONS, run_xpbd
+
+# The spec's substep length (90 frames/s x 30 substeps): "rate" damping is calibrated so that at
+# this dt exp(-c dt) equals the spec's per-substep factor 1 - damping/100.
+SPEC_DT = 1.0 / 2700.0
+
+
+def damping_rate(damping_percent: float) -> float:
+    """Per-second damping rate c with exp(-c * SPEC_DT) == 1 - damping/100 (finite even at 100 %)."""
+    keep = max(1.0 - damping_percent / 100.0, 1e-300)
+    return -math.log(keep) / SPEC_DT
+
+
+def damping_factors(sim: Any) -> tuple[float, float, float]:
+    """(f, phi, c) for one substep: velocity factor, force-term scale, rate (c = 0 in spec mode).
+
+    Spec mode: f = 1 - damping/100, phi = 1. Rate mode: f = exp(-c dt),
+    phi = (1 - f)/(c dt) (-> 1 as c dt -> 0).
+    """
+    if sim.scene.simulation.damping_mode == "spec":
+        return float(sim._keep), 1.0, 0.0
+    c = damping_rate(sim.scene.cloth.damping)
+    cdt = c * sim.dt
+    f = math.exp(-cdt)
+    phi = 1.0 if cdt < 1e-12 else -math.expm1(-cdt) / cdt
+    return f, phi, c
+
+
+class IntegratorState:
+    """Velocities, spring arrays and scratch buffers of one run (copyable for replays)."""
+
+    def __init__(self, sim: Any) -> None:
+        n = sim._pos.shape[1]
+        self.vel = (sim._pos - sim._last) / sim.dt
+        self.started = False
+        self.iterations = int(getattr(sim, "xpbd_iterations", XPBD_ITERATIONS))
+        self.mask = (~sim.pinned).astype(np.float64)
+        self.inv_mass = self.mask / sim.mass
+        self.scratch = np.zeros((7, 3, n))
+        self.cg_iterations = 0
+        self.bind_springs(sim)
+
+    def bind_springs(self, sim: Any) -> None:
+        """(Re)derive per-spring arrays when the enabled springs or ks changed."""
+        sp = sim.springs
+        self._springs = sp
+        self._ks = sim.ks
+        self.si = np.ascontiguousarray(sp.i)
+        self.sj = np.ascontiguousarray(sp.j)
+        self.kspr = np.where(sp.kind == BENDING, sim.ks * BENDING_STIFFNESS_FACTOR, sim.ks).astype(np.float64)
+        self.jac = np.zeros((6, len(sp)))
+        self.lam = np.zeros(len(sp))
+
+    def current(self, sim: Any) -> "IntegratorState":
+        """This state, re-bound if the simulation re-planned its springs or stiffness."""
+        if self._springs is not sim.springs or self._ks != sim.ks or self.mask.shape[0] != sim.pinned.shape[0]:
+            self.bind_springs(sim)
+            self.inv_mass = self.mask / sim.mass
+        return self
+
+    def copy(self) -> "IntegratorState":
+        """A copy for the blow-up replay: the evolving arrays are copied, scratch buffers shared."""
+        new = copy.copy(self)
+        new.vel = self.vel.copy()
+        return new
+
+
+def post_args(sim: Any) -> tuple:
+    """The correction passes' arguments, packed for :func:`clothsim.sim.passes.corrections`."""
+    return (sim.pinned, sim._self_mode, sim.scene.cloth.thickness, sim.scene.simulation.simulation_steps,
+            sim._cell, sim._keys, sim._slots, sim._start, sim._order, sim._stretch_limit, sim._spheres,
+            sim._planes, SURFACE_OFFSET, sim._box, sim._sphere_on, sim._plane_on)
+
+
+def state_of(sim: Any) -> IntegratorState:
+    """``sim.integrator_state``, created on first use."""
+    if sim.integrator_state is None:
+        sim.integrator_state = IntegratorState(sim)
+    return sim.integrator_state.current(sim)
+
+
+def advance(sim: Any, steps: int) -> None:
+    """Advance ``steps`` substeps with the scene's integrator and damping mode (in place)."""
+    if steps <= 0:
+        return
+    name = sim.scene.simulation.integrator
+    st = state_of(sim)
+    post = post_args(sim)
+    fix = has_corrections(post)
+    f, phi, c = damping_factors(sim)
+    dt = sim.dt
+    if name == "verlet":
+        if not st.started:
+            accumulate_forces(sim._pos, sim._forces, sim._blocks, sim._block_k, sim.springs.rest, sim.nw,
+                              sim.mass, sim._gravity, sim._tmp)
+            verlet_start(sim._pos, sim._last, st.vel, sim._forces, sim.free, 1.0 / sim.mass, dt, c)
+            st.started = True
+        sim.colliders_skipped += run_verlet_rate(steps, sim._pos, sim._last, sim._forces, sim.free, sim._blocks,
+                                                 sim._block_k, sim.springs.rest, sim.nw, sim._tmp, sim.mass,
+                                                 sim._gravity, dt, f, phi, post)
+    elif name == "symplectic_euler":
+        sim.colliders_skipped += run_symplectic(steps, sim._pos, sim._last, st.vel, sim._forces, sim.free,
+                                                sim._blocks, sim._block_k, sim.springs.rest, sim.nw, sim._tmp,
+                                                sim.mass, sim._gravity, dt, f, phi, post, fix)
+    elif name == "implicit_euler":
+        # Rate damping goes into the implicit system; spec damping scales the solved velocity.
+        keep_after = 1.0 if c > 0.0 else f
+        st.cg_iterations += run_implicit(steps, sim._pos, sim._last, st.vel, sim._forces, sim.free, st.mask,
+                                         sim._blocks, sim._block_k, sim.springs.rest, sim.nw, sim._tmp, st.si,
+                                         st.sj, st.kspr, st.jac, st.scratch, sim.mass, sim._gravity, dt, c,
+                                         keep_after, CG_TOLERANCE, CG_MAX_ITERATIONS, post, fix)
+    elif name == "xpbd":
+        sim.colliders_skipped += run_xpbd(steps, sim._pos, sim._last, st.vel, sim.free, st.inv_mass, sim._blocks,
+                                          sim.springs.rest, sim.nw, st.si, st.sj, st.kspr, st.lam, sim._gravity,
+                                          dt, f, phi, st.iterations, post)
+    else:  # the scene validator only admits the four names above
+        raise ValueError(f"unknown integrator {name!r}")
