@@ -169,3 +169,20 @@ def test_render_of_a_rested_cloth_reuses_its_image(tmp_path):
     reused = [line for line in r.stdout.splitlines() if line.startswith("reused")]
     assert reused and int(reused[0].split()[1]) > 0
     assert out.exists()
+
+
+@pytest.mark.parametrize("bench", [
+    ["bench", "stability", "--quick", "--integrators", "verlet"],
+    ["bench", "accuracy", "--quick", "--integrators", "verlet", "--max-substeps", "4", "--reference-substeps", "16",
+     "--no-spec-model"],
+])
+def test_analysis_benchmarks_do_not_load_egl(tmp_path, bench):
+    import subprocess
+    import sys
+
+    args = [*bench, "--png", str(tmp_path / "plot.png"), "--json", str(tmp_path / "out.json")]
+    code = (f"import sys, clothsim.cli as c; rc = c.main({args!r}); maps = open('/proc/self/maps').read(); "
+            "sys.exit(3 if 'libEGL' in maps or 'moderngl' in sys.modules else rc)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert (tmp_path / "plot.png").exists() and (tmp_path / "out.json").exists()
