@@ -2,23 +2,15 @@
 
 from __future__ import annotations
 
-import math
-import time
-from dataclasses import replace
-from typing import Callable
-
 import numpy as np
 
 from ..cloth import (BENDING, BENDING_STIFFNESS_FACTOR, Springs, all_springs, enabled_mask, grid_positions,
                      pinned_mask, spring_blocks)
 from ..errors import SimulationBlowUp
 from ..scene import Scene
-from .collide import SURFACE_OFFSET, collide_planes, collide_spheres
-from .constraints import provot
-from .forces import accumulate_forces
-from .frame import collide_reachable, run_substeps
-from .integrate import verlet
-from .selfcollide import MODE_GRID, MODE_SPEC, self_collide, table_size
+from .collide import SURFACE_OFFSET
+from .frame import run_substeps
+from .selfcollide import MODE_GRID, MODE_SPEC, table_size
 
 _SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID}
 
