@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..atomic import atomic_output
+from .plotting import save_grid_figure
 from ..errors import ClothsimError, SimulationBlowUp
 from ..scene import INTEGRATORS, Scene, SphereSpec, load_scene
 from ..sim import Simulation
@@ -212,12 +213,7 @@ def plot_work_precision(runs: list[Run], problems: list[str], dest: str) -> None
         ax.set_ylabel("RMS error / cloth size")
         ax.grid(True, which="major", alpha=0.3)
         ax.legend(fontsize=8)
-    for ax in list(axes.flat)[len(problems):]:
-        ax.set_visible(False)
-    fig.tight_layout()
-    with atomic_output(dest) as tmp:
-        fig.savefig(tmp, dpi=72, format="png")
-    plt.close(fig)
+    save_grid_figure(fig, axes, len(problems), dest)
 
 
 # ----------------------------------------------------------------------------------------------

@@ -19,6 +19,7 @@ import time
 import numpy as np
 
 from ..atomic import atomic_output
+from .plotting import save_grid_figure
 from ..errors import ClothsimError, SimulationBlowUp
 from ..scene import INTEGRATORS, Scene, load_scene
 from ..sim import Simulation
@@ -135,12 +136,7 @@ def plot_map(runs: list[dict], integrators: tuple[str, ...], grid: int, fps: flo
         ax.set_xlabel("ks / density  (N/m per kg/m^2)")
         ax.set_ylabel("substeps per frame")
         ax.legend(fontsize=7, loc="upper left")
-    for ax in list(axes.flat)[len(integrators):]:
-        ax.set_visible(False)
-    fig.tight_layout()
-    with atomic_output(dest) as tmp:
-        fig.savefig(tmp, dpi=72, format="png")
-    plt.close(fig)
+    save_grid_figure(fig, axes, len(integrators), dest)
 
 
 def add_parser(bench_sub: argparse._SubParsersAction) -> None:
