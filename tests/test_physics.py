@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -144,6 +148,21 @@ def test_same_scene_twice_is_bit_identical(name):
     a.reset()
     a.step(40)
     assert a.positions.tobytes() == b.positions.tobytes()
+
+
+@pytest.mark.parametrize("name", ["sphere", "pinned2", "selfCollision"])
+def test_result_does_not_depend_on_the_number_of_threads(name, tmp_path):
+    # The kernels split work over the cores; each output element must still be computed the same
+    # way, so one thread and two give the same bits.
+    outs = []
+    for threads in ("1", "2"):
+        out = tmp_path / f"{threads}.npz"
+        env = {**os.environ, "NUMBA_NUM_THREADS": threads}
+        done = subprocess.run([sys.executable, "-m", "clothsim", "simulate", name, "--frames", "30", "--out",
+                               str(out)], capture_output=True, text=True, env=env, timeout=300)
+        assert done.returncode == 0, done.stderr
+        outs.append(np.load(out)["positions"])
+    assert outs[0].tobytes() == outs[1].tobytes()
 
 
 def test_positions_is_a_view_and_parameters_change_between_frames():

@@ -12,6 +12,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ..sim.jit import EXACT
+
 CLOTH_FLOATS = 9  # position(3) normal(3) tangent(3)
 
 
@@ -38,7 +40,7 @@ def cloth_uvs(nw: int, nh: int) -> np.ndarray:
     return np.ascontiguousarray(np.stack([uu.ravel(), vv.ravel()], axis=1))
 
 
-@njit(cache=True)
+@njit(**EXACT)
 def update_cloth_vertices(positions, nw, nh, with_tangents, out):  # pragma: no cover - compiled
     """Fill ``out`` (N, 9) float32 with positions, unit normals and (optionally) unit tangents.
 

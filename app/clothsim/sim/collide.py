@@ -10,13 +10,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .jit import FASTMATH
+from .jit import KERNEL
 
 # The spec's SURFACE_OFFSET: how far above a plane a corrected point is put.
 SURFACE_OFFSET = 0.0001
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def collide_spheres(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spheres: np.ndarray) -> None:
     """Push points inside a sphere to its surface, moving from ``last`` scaled by (1 - friction)."""
     for o in range(spheres.shape[0]):
@@ -40,7 +40,7 @@ def collide_spheres(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spheres
                 pos[2, p] = last[2, p] + (oz + dz * s - last[2, p]) * keep
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def collide_planes(pos: np.ndarray, last: np.ndarray, free: np.ndarray, planes: np.ndarray,
                    offset: float) -> None:
     """Bounce back points that crossed a plane during the last step.

@@ -12,11 +12,11 @@ import numpy as np
 from numba import njit
 
 from .forces import accumulate_forces
-from .jit import FASTMATH
+from .jit import KERNEL, EXACT
 from .passes import corrections
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def verlet_start(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray, free: np.ndarray,
                  inv_mass: float, dt: float, c: float) -> None:
     """Second-order start: last = x0 - v0*dt + a0*dt^2/2 with a0 = F/m - c*v0 (free points)."""
@@ -27,7 +27,7 @@ def verlet_start(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.
             last[ax, p] = pos[ax, p] - vel[ax, p] * dt + 0.5 * a0 * dt * dt
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def verlet_rate_step(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, free: np.ndarray, inv_mass: float,
                      dt: float, f: float, phi: float) -> None:
     """x' = x + f*(x - x_last) + phi*a*dt^2 for free points; last <- x."""
@@ -43,20 +43,20 @@ def verlet_rate_step(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, free
             xl[p] = cur
 
 
-@njit(cache=True)
+@njit(**EXACT)
 def run_verlet_rate(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarray, free: np.ndarray,
-                    blocks: np.ndarray, block_k: np.ndarray, rest: np.ndarray, nw: int, tmp: np.ndarray,
+                    blocks: np.ndarray, stream: tuple, rest: np.ndarray, nw: int,
                     mass: float, gravity: np.ndarray, dt: float, f: float, phi: float, post: tuple) -> int:
     """``steps`` substeps of rate-damped Verlet plus the shared corrections; returns colliders skipped."""
     skipped = 0
     for _ in range(steps):
-        accumulate_forces(pos, forces, blocks, block_k, rest, nw, mass, gravity, tmp)
+        accumulate_forces(pos, forces, stream, mass, gravity)
         verlet_rate_step(pos, last, forces, free, 1.0 / mass, dt, f, phi)
         skipped += corrections(pos, last, free, blocks, rest, nw, post)
     return skipped
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def symplectic_step(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray, free: np.ndarray,
                     inv_mass: float, dt: float, f: float, phi: float) -> None:
     """Kick v <- f*v + phi*dt*F/m, then drift x <- x + dt*v; last <- x (free points)."""
@@ -70,7 +70,7 @@ def symplectic_step(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: 
             pos[ax, p] += dt * v
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def velocities_from_positions(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, free: np.ndarray,
                               dt: float) -> None:
     """v = (x - x_last)/dt, so that collision and Provot corrections also change the velocity."""
@@ -81,15 +81,15 @@ def velocities_from_positions(pos: np.ndarray, last: np.ndarray, vel: np.ndarray
             vel[ax, p] = (pos[ax, p] - last[ax, p]) * inv
 
 
-@njit(cache=True)
+@njit(**EXACT)
 def run_symplectic(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray,
-                   free: np.ndarray, blocks: np.ndarray, block_k: np.ndarray, rest: np.ndarray, nw: int,
-                   tmp: np.ndarray, mass: float, gravity: np.ndarray, dt: float, f: float, phi: float,
+                   free: np.ndarray, blocks: np.ndarray, stream: tuple, rest: np.ndarray, nw: int,
+                    mass: float, gravity: np.ndarray, dt: float, f: float, phi: float,
                    post: tuple, fix_velocity: bool) -> int:
     """``steps`` substeps of symplectic Euler plus the shared corrections; returns colliders skipped."""
     skipped = 0
     for _ in range(steps):
-        accumulate_forces(pos, forces, blocks, block_k, rest, nw, mass, gravity, tmp)
+        accumulate_forces(pos, forces, stream, mass, gravity)
         symplectic_step(pos, last, vel, forces, free, 1.0 / mass, dt, f, phi)
         skipped += corrections(pos, last, free, blocks, rest, nw, post)
         if fix_velocity:

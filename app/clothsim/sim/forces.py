@@ -1,66 +1,93 @@
 """Force accumulation: uniform external acceleration plus Hooke springs.
 
-State is struct-of-arrays: ``pos`` and ``forces`` are (3, N). Springs of a grid come in
-blocks, one per family direction (see :func:`clothsim.cloth.spring_blocks`): inside a block
-row both end points advance by one index per spring, so the row is a contiguous stream that
-LLVM vectorises. Each row is computed into a scratch buffer first and then added to both ends
-in two separate loops, because adding in place would chain every spring to its neighbour.
+State is struct-of-arrays: ``pos`` and ``forces`` are (3, N). The springs come as whole-grid
+streams (:func:`clothsim.cloth.spring_streams`): block g joins every point ``a`` to
+``a + offset[g]``, with zero stiffness where the grid has no such spring. Two passes, each
+split over the cores:
+
+1. per spring: the Hooke force of the spring starting at ``a`` goes to ``buf[g, :, a + offset]``;
+2. per point: ``F[p] = m g + sum_g buf[g, :, p + offset] - buf[g, :, p]`` (the spring that starts
+   at p pulls it one way, the one that ends at p the other).
+
+Every entry of either pass depends on its own inputs only and is summed in a fixed block order,
+so the result is bit-for-bit the same whatever the number of threads. Both passes read and
+write contiguous slices: an index such as ``pos[a0 + t]`` would be treated as possibly
+negative, and Numba's wraparound check turns such loads into slow gathers.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from .jit import FASTMATH
+from .jit import KERNEL, PARALLEL
+
+# Work items per pass: enough for the cores to share the work evenly, few enough that each
+# item is a long vectorised stream.
+CHUNKS = 8
 
 
-@njit(cache=True, fastmath=FASTMATH)
-def accumulate_forces(pos: np.ndarray, forces: np.ndarray, blocks: np.ndarray, block_k: np.ndarray,
-                      rest: np.ndarray, nw: int, mass: float, gravity: np.ndarray, tmp: np.ndarray) -> None:
-    """forces = mass * gravity + sum of spring forces ``k * (length - rest)`` along each spring.
+@njit(**PARALLEL)
+def spring_pass(pos: np.ndarray, offsets: np.ndarray, k: np.ndarray, rest: np.ndarray, buf: np.ndarray) -> None:
+    """buf[g, :, a + offset[g]] = k * (|d| - rest) * d / |d| with d = pos[b] - pos[a], b = a + offset[g]."""
+    n = pos.shape[1]
+    blocks = offsets.shape[0]
+    # point range major, so each core writes the part of ``buf`` it gathers next
+    for job in prange(blocks * CHUNKS):
+        c = job // blocks
+        g = job % blocks
+        off = offsets[g]
+        m = n - off
+        lo = c * m // CHUNKS
+        hi = (c + 1) * m // CHUNKS
+        ln = hi - lo
+        ax = pos[0, lo:hi]
+        ay = pos[1, lo:hi]
+        az = pos[2, lo:hi]
+        bx = pos[0, lo + off : hi + off]
+        by = pos[1, lo + off : hi + off]
+        bz = pos[2, lo + off : hi + off]
+        kk = k[g, lo:hi]
+        rl = rest[g, lo:hi]
+        ox = buf[g, 0, lo + off : hi + off]
+        oy = buf[g, 1, lo + off : hi + off]
+        oz = buf[g, 2, lo + off : hi + off]
+        for t in range(ln):
+            ex = bx[t] - ax[t]
+            ey = by[t] - ay[t]
+            ez = bz[t] - az[t]
+            d = np.sqrt(ex * ex + ey * ey + ez * ez)
+            f = kk[t] * (d - rl[t]) / d if d > 0.0 else 0.0
+            ox[t] = f * ex
+            oy[t] = f * ey
+            oz[t] = f * ez
 
-    ``blocks`` rows are (dx, dy, x0, x1, first_spring, num_rows); ``block_k`` the stiffness of
-    each block (bending blocks already scaled); ``tmp`` is a (3, nw) scratch buffer.
+
+@njit(**PARALLEL)
+def gather_pass(offsets: np.ndarray, buf: np.ndarray, mass: float, gravity: np.ndarray, forces: np.ndarray) -> None:
+    """forces[:, p] = mass * gravity + sum over blocks of buf[g, :, p + offset] - buf[g, :, p]."""
+    n = forces.shape[1]
+    for c in prange(CHUNKS):
+        lo = c * n // CHUNKS
+        hi = (c + 1) * n // CHUNKS
+        for ax in range(3):
+            f = forces[ax, lo:hi]
+            f[:] = mass * gravity[ax]
+            for g in range(offsets.shape[0]):
+                off = offsets[g]
+                pulled = buf[g, ax, lo + off : hi + off]
+                pushed = buf[g, ax, lo:hi]
+                for t in range(hi - lo):
+                    f[t] += pulled[t] - pushed[t]
+
+
+@njit(**KERNEL)
+def accumulate_forces(pos: np.ndarray, forces: np.ndarray, stream: tuple, mass: float, gravity: np.ndarray) -> None:
+    """forces = mass * gravity + the sum of the Hooke forces ``k * (length - rest)`` of all springs.
+
+    ``stream`` is the tuple returned by :func:`clothsim.cloth.spring_streams` (bending blocks'
+    stiffness already scaled).
     """
-    px = pos[0]
-    py = pos[1]
-    pz = pos[2]
-    fx = forces[0]
-    fy = forces[1]
-    fz = forces[2]
-    tx = tmp[0]
-    ty = tmp[1]
-    tz = tmp[2]
-    fx[:] = mass * gravity[0]
-    fy[:] = mass * gravity[1]
-    fz[:] = mass * gravity[2]
-    for g in range(blocks.shape[0]):
-        dx = blocks[g, 0]
-        dy = blocks[g, 1]
-        x0 = blocks[g, 2]
-        length = blocks[g, 3] - x0
-        first = blocks[g, 4]
-        rows = blocks[g, 5]
-        k = block_k[g]
-        for r in range(rows):
-            a0 = r * nw + x0 - dx
-            b0 = (r + dy) * nw + x0
-            s0 = first + r * length
-            for t in range(length):
-                ex = px[b0 + t] - px[a0 + t]
-                ey = py[b0 + t] - py[a0 + t]
-                ez = pz[b0 + t] - pz[a0 + t]
-                d = np.sqrt(ex * ex + ey * ey + ez * ez)
-                f = k * (d - rest[s0 + t]) / d if d > 0.0 else 0.0
-                tx[t] = f * ex
-                ty[t] = f * ey
-                tz[t] = f * ez
-            for t in range(length):
-                fx[a0 + t] += tx[t]
-                fy[a0 + t] += ty[t]
-                fz[a0 + t] += tz[t]
-            for t in range(length):
-                fx[b0 + t] -= tx[t]
-                fy[b0 + t] -= ty[t]
-                fz[b0 + t] -= tz[t]
+    offsets, k, rest, buf = stream
+    spring_pass(pos, offsets, k, rest, buf)
+    gather_pass(offsets, buf, mass, gravity, forces)

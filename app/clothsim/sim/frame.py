@@ -10,9 +10,10 @@ wholly on one side of, cannot act this substep and is skipped exactly.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from .jit import FASTMATH
+from .forces import CHUNKS
+from .jit import EXACT, KERNEL, PARALLEL
 
 from .collide import collide_planes, collide_spheres
 from .constraints import provot
@@ -21,26 +22,30 @@ from .integrate import verlet
 from .selfcollide import self_collide
 
 
-@njit(cache=True, fastmath=FASTMATH)
-def free_bounds(pos: np.ndarray, last: np.ndarray, free: np.ndarray, box: np.ndarray) -> None:
-    """box = [min xyz, max xyz] over the current and last positions of the free points."""
+@njit(**KERNEL)
+def cloth_bounds(pos: np.ndarray, last: np.ndarray, box: np.ndarray) -> None:
+    """box = [min xyz, max xyz] over the current and last positions of all points.
+
+    Pinned points are included: they only widen the box, which keeps the skip test exact, and
+    the sweep stays contiguous (vectorised).
+    """
     for c in range(3):
-        box[c] = np.inf
-        box[3 + c] = -np.inf
-    for k in range(free.shape[0]):
-        p = free[k]
-        for c in range(3):
-            a = pos[c, p]
-            b = last[c, p]
-            lo = a if a < b else b
-            hi = a if a > b else b
-            if lo < box[c]:
-                box[c] = lo
-            if hi > box[3 + c]:
-                box[3 + c] = hi
+        lo = np.inf
+        hi = -np.inf
+        x = pos[c]
+        xl = last[c]
+        for p in range(x.shape[0]):
+            a = x[p]
+            b = xl[p]
+            m = a if a < b else b
+            lo = m if m < lo else lo
+            m = a if a > b else b
+            hi = m if m > hi else hi
+        box[c] = lo
+        box[3 + c] = hi
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def reachable_colliders(box: np.ndarray, spheres: np.ndarray, planes: np.ndarray, sphere_on: np.ndarray,
                         plane_on: np.ndarray) -> int:
     """Mark which colliders the bounding box may touch; returns how many were ruled out."""
@@ -70,42 +75,52 @@ def reachable_colliders(box: np.ndarray, spheres: np.ndarray, planes: np.ndarray
     return skipped
 
 
-@njit(cache=True)
+@njit(**PARALLEL)
 def collide_reachable(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spheres: np.ndarray,
                       planes: np.ndarray, offset: float, box: np.ndarray, sphere_on: np.ndarray,
                       plane_on: np.ndarray) -> int:
-    """Collide with the colliders the cloth can reach; returns the number skipped."""
-    free_bounds(pos, last, free, box)
+    """Collide with the colliders the cloth can reach; returns the number skipped.
+
+    A point's correction depends on that point alone, so the free points are split over the
+    cores; each point meets the spheres, then the planes, in scene order.
+    """
+    cloth_bounds(pos, last, box)
     skipped = reachable_colliders(box, spheres, planes, sphere_on, plane_on)
-    for o in range(spheres.shape[0]):
-        if sphere_on[o]:
-            collide_spheres(pos, last, free, spheres[o : o + 1])
-    for o in range(planes.shape[0]):
-        if plane_on[o]:
-            collide_planes(pos, last, free, planes[o : o + 1], offset)
+    n = free.shape[0]
+    for c in prange(CHUNKS):
+        part = free[c * n // CHUNKS : (c + 1) * n // CHUNKS]
+        for o in range(spheres.shape[0]):
+            if sphere_on[o]:
+                collide_spheres(pos, last, part, spheres[o : o + 1])
+        for o in range(planes.shape[0]):
+            if plane_on[o]:
+                collide_planes(pos, last, part, planes[o : o + 1], offset)
     return skipped
 
 
-@njit(cache=True)
+@njit(**EXACT)
 def run_substeps(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarray, free: np.ndarray,
-                 pinned: np.ndarray, blocks: np.ndarray, block_k: np.ndarray, rest: np.ndarray, nw: int,
-                 tmp: np.ndarray, mass: float, gravity: np.ndarray, dt: float, keep: float, spheres: np.ndarray,
+                 pinned: np.ndarray, blocks: np.ndarray, stream: tuple, rest: np.ndarray, nw: int,
+                  mass: float, gravity: np.ndarray, dt: float, keep: float, spheres: np.ndarray,
                  planes: np.ndarray, offset: float, self_mode: int, thickness: float, sim_steps: int,
                  cell: np.ndarray, keys: np.ndarray, slots: np.ndarray, start: np.ndarray,
                  order: np.ndarray, stretch_limit: float, box: np.ndarray, sphere_on: np.ndarray,
                  plane_on: np.ndarray) -> int:
     """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
 
-    State arrays are (3, N); springs come as blocks (see :func:`clothsim.cloth.spring_blocks`).
+    State arrays are (3, N). Springs come twice: as whole-grid streams for the forces
+    (:func:`clothsim.cloth.spring_streams`) and as block rows for Provot's in-place pass
+    (:func:`clothsim.cloth.spring_blocks`).
 
     ``self_mode`` 0 turns self-collision off; ``stretch_limit`` <= 0 turns Provot off.
     """
     inv_mass = 1.0 / mass
     has_colliders = spheres.shape[0] + planes.shape[0] > 0
+    pins = np.flatnonzero(pinned)
     skipped = 0
     for _ in range(steps):
-        accumulate_forces(pos, forces, blocks, block_k, rest, nw, mass, gravity, tmp)
-        verlet(pos, last, forces, free, inv_mass, dt, keep)
+        accumulate_forces(pos, forces, stream, mass, gravity)
+        verlet(pos, last, forces, pins, inv_mass, dt, keep)
         if self_mode != 0:
             self_collide(pos, free, thickness, sim_steps, self_mode, cell[0], cell[1], cell[2], keys, slots,
                          start, order)

@@ -18,9 +18,11 @@ import math
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from ..cloth import BENDING, BENDING_STIFFNESS_FACTOR, all_springs, enabled_mask, grid_positions, pinned_mask
 from ..scene import Scene
+from .jit import EXACT
 
 EXPLICIT_INTEGRATORS = ("verlet", "symplectic_euler")
 
@@ -89,19 +91,38 @@ def blow_up_reason(pos: np.ndarray, last: np.ndarray, free: np.ndarray, dt: floa
     elastic energy and (static colliders and damping only remove energy) its kinetic energy can
     only come from the work gravity has done, g . (drop of the free points' centre of mass).
     """
-    if not np.isfinite(pos).all():
+    finite, sum_d2, drop = _frame_sums(pos, last, free, start)
+    if not finite:
         return "positions became non-finite"
     n = free.shape[0]
     if n == 0:
         return None
-    d = pos[:, free] - last[:, free]
-    ke = 0.5 * float(np.einsum("ij,ij->", d, d)) / (n * dt * dt)
-    work = float(gravity @ (pos[:, free].mean(axis=1) - start[:, free].mean(axis=1)))
+    ke = 0.5 * sum_d2 / (n * dt * dt)
+    work = float(gravity @ drop) / n
     bound = ENERGY_FACTOR * max(work, 0.0) + ENERGY_SLACK
     if not ke <= bound:
         return (f"kinetic energy blew up ({ke:.3g} J/kg > bound {bound:.3g} J/kg = "
                 f"{ENERGY_FACTOR:g} x gravity work + {ENERGY_SLACK:g})")
     return None
+
+
+@njit(**EXACT)
+def _frame_sums(pos: np.ndarray, last: np.ndarray, free: np.ndarray, start: np.ndarray) -> tuple:
+    """(all positions finite, sum over free points of |pos - last|^2, sum of pos - start)."""
+    finite = True
+    for c in range(3):
+        for p in range(pos.shape[1]):
+            if not np.isfinite(pos[c, p]):
+                finite = False
+    sum_d2 = 0.0
+    drop = np.zeros(3)
+    for k in range(free.shape[0]):
+        p = free[k]
+        for c in range(3):
+            d = pos[c, p] - last[c, p]
+            sum_d2 += d * d
+            drop[c] += pos[c, p] - start[c, p]
+    return finite, sum_d2, drop
 
 
 def sim_blow_up_reason(sim: Any) -> str | None:

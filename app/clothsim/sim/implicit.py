@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .jit import FASTMATH
+from .jit import KERNEL, EXACT
 from .explicit import velocities_from_positions
 from .forces import accumulate_forces
 from .passes import corrections
@@ -23,7 +23,7 @@ CG_TOLERANCE = 1e-9
 CG_MAX_ITERATIONS = 400
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def spring_jacobians(pos: np.ndarray, si: np.ndarray, sj: np.ndarray, rest: np.ndarray, kspr: np.ndarray,
                      jac: np.ndarray) -> None:
     """jac (6, S) = the symmetric blocks Ks as (xx, yy, zz, xy, xz, yz)."""
@@ -55,7 +55,7 @@ def spring_jacobians(pos: np.ndarray, si: np.ndarray, sj: np.ndarray, rest: np.n
         jac[5, s] = u * dy * dz
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def apply_stiffness(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
     """out = K y for the assembled spring blocks (K positive semidefinite)."""
     out[:, :] = 0.0
@@ -76,7 +76,7 @@ def apply_stiffness(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, y: np.ndarr
         out[2, b] -= gz
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def _dot(x: np.ndarray, y: np.ndarray) -> float:
     acc = 0.0
     for ax in range(3):
@@ -85,7 +85,7 @@ def _dot(x: np.ndarray, y: np.ndarray) -> float:
     return acc
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def solve_velocity_change(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, mask: np.ndarray, b: np.ndarray,
                           diag: np.ndarray, m_eff: float, h2: float, dv: np.ndarray, r: np.ndarray,
                           z: np.ndarray, p: np.ndarray, ap: np.ndarray, tol: float, max_iter: int) -> int:
@@ -131,7 +131,7 @@ def solve_velocity_change(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, mask:
     return it
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def implicit_update(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray, free: np.ndarray,
                     mask: np.ndarray, si: np.ndarray, sj: np.ndarray, rest: np.ndarray, kspr: np.ndarray,
                     jac: np.ndarray, scratch: np.ndarray, mass: float, dt: float, c: float, keep_after: float,
@@ -168,16 +168,16 @@ def implicit_update(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: 
     return its
 
 
-@njit(cache=True)
+@njit(**EXACT)
 def run_implicit(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray,
-                 free: np.ndarray, mask: np.ndarray, blocks: np.ndarray, block_k: np.ndarray, rest: np.ndarray,
-                 nw: int, tmp: np.ndarray, si: np.ndarray, sj: np.ndarray, kspr: np.ndarray, jac: np.ndarray,
+                 free: np.ndarray, mask: np.ndarray, blocks: np.ndarray, stream: tuple, rest: np.ndarray,
+                 nw: int, si: np.ndarray, sj: np.ndarray, kspr: np.ndarray, jac: np.ndarray,
                  scratch: np.ndarray, mass: float, gravity: np.ndarray, dt: float, c: float, keep_after: float,
                  tol: float, max_iter: int, post: tuple, fix_velocity: bool) -> int:
     """``steps`` implicit substeps plus the shared corrections; returns total CG iterations."""
     total = 0
     for _ in range(steps):
-        accumulate_forces(pos, forces, blocks, block_k, rest, nw, mass, gravity, tmp)
+        accumulate_forces(pos, forces, stream, mass, gravity)
         total += implicit_update(pos, last, vel, forces, free, mask, si, sj, rest, kspr, jac, scratch, mass, dt,
                                  c, keep_after, tol, max_iter)
         corrections(pos, last, free, blocks, rest, nw, post)

@@ -122,22 +122,21 @@ def advance(sim: Any, steps: int) -> None:
     dt = sim.dt
     if name == "verlet":
         if not st.started:
-            accumulate_forces(sim._pos, sim._forces, sim._blocks, sim._block_k, sim.springs.rest, sim.nw,
-                              sim.mass, sim._gravity, sim._tmp)
+            accumulate_forces(sim._pos, sim._forces, sim._stream, sim.mass, sim._gravity)
             verlet_start(sim._pos, sim._last, st.vel, sim._forces, sim.free, 1.0 / sim.mass, dt, c)
             st.started = True
         sim.colliders_skipped += run_verlet_rate(steps, sim._pos, sim._last, sim._forces, sim.free, sim._blocks,
-                                                 sim._block_k, sim.springs.rest, sim.nw, sim._tmp, sim.mass,
+                                                 sim._stream, sim.springs.rest, sim.nw, sim.mass,
                                                  sim._gravity, dt, f, phi, post)
     elif name == "symplectic_euler":
         sim.colliders_skipped += run_symplectic(steps, sim._pos, sim._last, st.vel, sim._forces, sim.free,
-                                                sim._blocks, sim._block_k, sim.springs.rest, sim.nw, sim._tmp,
+                                                sim._blocks, sim._stream, sim.springs.rest, sim.nw,
                                                 sim.mass, sim._gravity, dt, f, phi, post, fix)
     elif name == "implicit_euler":
         # Rate damping goes into the implicit system; spec damping scales the solved velocity.
         keep_after = 1.0 if c > 0.0 else f
         st.cg_iterations += run_implicit(steps, sim._pos, sim._last, st.vel, sim._forces, sim.free, st.mask,
-                                         sim._blocks, sim._block_k, sim.springs.rest, sim.nw, sim._tmp, st.si,
+                                         sim._blocks, sim._stream, sim.springs.rest, sim.nw, st.si,
                                          st.sj, st.kspr, st.jac, st.scratch, sim.mass, sim._gravity, dt, c,
                                          keep_after, CG_TOLERANCE, CG_MAX_ITERATIONS, post, fix)
     elif name == "xpbd":

@@ -10,12 +10,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .jit import EXACT
+
 from .constraints import provot
 from .frame import collide_reachable
 from .selfcollide import self_collide
 
 
-@njit(cache=True)
+@njit(**EXACT)
 def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.ndarray, rest: np.ndarray,
                 nw: int, post: tuple) -> int:
     """Apply self-collision, colliders and Provot in place; returns the colliders skipped.

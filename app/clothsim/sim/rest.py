@@ -6,8 +6,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .jit import EXACT
 
-@njit(cache=True)
+
+@njit(**EXACT)
 def max_displacement(a: np.ndarray, b: np.ndarray) -> float:
     """Largest Euclidean distance between matching columns of two (3, N) arrays."""
     best = 0.0

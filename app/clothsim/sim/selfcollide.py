@@ -19,9 +19,10 @@ positions the map was built from.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
-from .jit import FASTMATH
+from .forces import CHUNKS
+from .jit import EXACT, KERNEL, PARALLEL
 
 MODE_SPEC = 1
 MODE_GRID = 2
@@ -38,18 +39,18 @@ def table_size(n_points: int) -> int:
     return m
 
 
-@njit(cache=True)
+@njit(**EXACT)
 def _cell_key(ix: np.int64, iy: np.int64, iz: np.int64) -> np.int64:
     return ((ix & _MASK) << (2 * _BITS)) | ((iy & _MASK) << _BITS) | (iz & _MASK)
 
 
-@njit(cache=True)
+@njit(**EXACT)
 def _slot(ix: np.int64, iy: np.int64, iz: np.int64, mask: np.int64) -> np.int64:
     # Large primes from the spatial-hashing literature spread neighbouring cells over the table.
     return ((ix * 73856093) ^ (iy * 19349663) ^ (iz * 83492791)) & mask
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def build_map(pos: np.ndarray, cw: float, ch: float, ct: float, keys: np.ndarray, slots: np.ndarray,
               start: np.ndarray, order: np.ndarray) -> None:
     """Bin every point; afterwards the points of table slot k are order[start[k]:start[k+1]]."""
@@ -79,7 +80,7 @@ def build_map(pos: np.ndarray, cw: float, ch: float, ct: float, keys: np.ndarray
     start[m] = n
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def _repel(pos: np.ndarray, p: int, q: int, dist: float, acc: np.ndarray) -> int:
     dx = pos[0, p] - pos[0, q]
     dy = pos[1, p] - pos[1, q]
@@ -95,13 +96,104 @@ def _repel(pos: np.ndarray, p: int, q: int, dist: float, acc: np.ndarray) -> int
     return 0
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**PARALLEL)
+def _collide_cells(pos: np.ndarray, movable: np.ndarray, dist: float, steps: int, keys: np.ndarray,
+                   start: np.ndarray, order: np.ndarray) -> None:
+    """The spec's query, one hash-table slot at a time, the slots holding two or more points split
+    over the cores.
+
+    A point's candidates all share its slot, and only points of its own cell (same key) ever
+    move it, so each slot can be finished on its own: its points are processed in increasing
+    index order (the order ``build_map`` lists them in), which is exactly the sequential
+    point-order pass restricted to that cell. The slot's points are copied into contiguous
+    arrays first so that the candidate loop is a vectorised sweep.
+    """
+    n = order.shape[0]
+    m = start.shape[0] - 1
+    busy = np.empty(m, dtype=np.int64)
+    nb = 0
+    for s in range(m):
+        if start[s + 1] - start[s] >= 2:
+            busy[nb] = s
+            nb += 1
+    xs = np.empty(n)
+    ys = np.empty(n)
+    zs = np.empty(n)
+    ks = np.empty(n, dtype=np.int64)
+    for t in range(n):
+        q = order[t]
+        xs[t] = pos[0, q]
+        ys[t] = pos[1, q]
+        zs[t] = pos[2, q]
+        ks[t] = keys[q]
+    dist2 = dist * dist
+    for c in prange(CHUNKS):
+        for b in range(c * nb // CHUNKS, (c + 1) * nb // CHUNKS):
+            s0 = start[busy[b]]
+            s1 = start[busy[b] + 1]
+            cx = xs[s0:s1]
+            cy = ys[s0:s1]
+            cz = zs[s0:s1]
+            ck = ks[s0:s1]
+            for i in range(s1 - s0):
+                p = order[s0 + i]
+                if not movable[p]:
+                    continue
+                px = cx[i]
+                py = cy[i]
+                pz = cz[i]
+                key = ck[i]
+                # Most points have no neighbour within dist: a compare-only sweep (vectorised,
+                # no square root) finds those, and only the others run the exact loop.
+                near = 0
+                for j in range(s1 - s0):
+                    dx = px - cx[j]
+                    dy = py - cy[j]
+                    dz = pz - cz[j]
+                    d2 = dx * dx + dy * dy + dz * dz
+                    near += (ck[j] == key) & (d2 < dist2) & (d2 > 0.0)
+                if near == 0:
+                    continue
+                sx = 0.0
+                sy = 0.0
+                sz = 0.0
+                count = 0
+                for j in range(s1 - s0):
+                    dx = px - cx[j]
+                    dy = py - cy[j]
+                    dz = pz - cz[j]
+                    d2 = dx * dx + dy * dy + dz * dz
+                    # d2 > 0 also drops the point itself
+                    if ck[j] == key and d2 < dist2 and d2 > 0.0:
+                        length = np.sqrt(d2)
+                        f = (dist - length) / length
+                        sx += dx * f
+                        sy += dy * f
+                        sz += dz * f
+                        count += 1
+                if count > 0:
+                    scale = 1.0 / (count * steps)
+                    cx[i] = px + sx * scale
+                    cy[i] = py + sy * scale
+                    cz[i] = pz + sz * scale
+                    pos[0, p] = cx[i]
+                    pos[1, p] = cy[i]
+                    pos[2, p] = cz[i]
+
+
+@njit(**KERNEL)
 def self_collide(pos: np.ndarray, free: np.ndarray, thickness: float, steps: int, mode: int, cw: float,
                  ch: float, ct: float, keys: np.ndarray, slots: np.ndarray, start: np.ndarray,
                  order: np.ndarray) -> None:
     """Build the map from the current positions, then repel close pairs (see module doc)."""
     build_map(pos, cw, ch, ct, keys, slots, start, order)
     dist = 2.0 * thickness
+    if mode == MODE_SPEC:
+        movable = np.zeros(pos.shape[1], dtype=np.bool_)
+        for k in range(free.shape[0]):
+            movable[free[k]] = True
+        _collide_cells(pos, movable, dist, steps, keys, start, order)
+        return
     mask = np.int64(start.shape[0] - 2)
     acc = np.zeros(3)
     for k in range(free.shape[0]):

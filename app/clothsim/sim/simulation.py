@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..cloth import (BENDING, BENDING_STIFFNESS_FACTOR, Springs, all_springs, enabled_mask, grid_positions,
-                     pinned_mask, spring_blocks)
+                     pinned_mask, spring_blocks, spring_streams)
 from ..errors import SimulationBlowUp
 from ..scene import Scene
 from .collide import SURFACE_OFFSET
@@ -34,7 +34,6 @@ class Simulation:
         # Stored as (3, N) so the kernels stream each coordinate; users see (N, 3) views.
         self._pos = np.ascontiguousarray(self.initial_positions.T)
         self._last = self._pos.copy()
-        self._tmp = np.zeros((3, self.nw))
         self.pinned = pinned_mask(cloth)
         self.free = np.flatnonzero(~self.pinned).astype(np.int32)
         self._all_springs = all_springs(self.nw, self.nh, self.initial_positions)
@@ -116,7 +115,8 @@ class Simulation:
         self.springs: Springs = self._all_springs.select(mask)
         self._blocks, families = spring_blocks(self.nw, self.nh, cloth.enable_structural, cloth.enable_shearing,
                                                cloth.enable_bending)
-        self._block_k = np.where(families == BENDING, cloth.ks * BENDING_STIFFNESS_FACTOR, cloth.ks)
+        block_k = np.where(families == BENDING, cloth.ks * BENDING_STIFFNESS_FACTOR, cloth.ks)
+        self._stream = spring_streams(self.nw, self.nh, self._blocks, block_k, self.springs.rest)
         self._gravity = np.asarray(sim.gravity, dtype=np.float64)
         self._keep = 1.0 - cloth.damping / 100.0
         self._self_mode = _SELF_MODES[sim.self_collision]
@@ -150,8 +150,8 @@ class Simulation:
             self._advance_frame()
 
     def _substep_args(self) -> tuple:
-        return (self._pos, self._last, self._forces, self.free, self.pinned, self._blocks, self._block_k,
-                self.springs.rest, self.nw, self._tmp, self.mass, self._gravity, self.dt, self._keep,
+        return (self._pos, self._last, self._forces, self.free, self.pinned, self._blocks, self._stream,
+                self.springs.rest, self.nw, self.mass, self._gravity, self.dt, self._keep,
                 self._spheres, self._planes, SURFACE_OFFSET, self._self_mode, self.scene.cloth.thickness,
                 self.scene.simulation.simulation_steps, self._cell, self._keys, self._slots, self._start,
                 self._order, self._stretch_limit, self._box, self._sphere_on, self._plane_on)

@@ -13,14 +13,14 @@ import numpy as np
 from numba import njit
 
 from .explicit import velocities_from_positions
-from .jit import FASTMATH
+from .jit import KERNEL, EXACT
 from .passes import corrections
 
 # Gauss-Seidel passes over all springs per substep.
 XPBD_ITERATIONS = 4
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def predict(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, free: np.ndarray, gravity: np.ndarray,
             dt: float, f: float, phi: float) -> None:
     """Damp and kick velocities by gravity, then move free points: x~ = x + dt v; last <- x."""
@@ -34,7 +34,7 @@ def predict(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, free: np.ndarray
             pos[ax, q] += dt * v
 
 
-@njit(cache=True, fastmath=FASTMATH)
+@njit(**KERNEL)
 def solve_constraints(pos: np.ndarray, w: np.ndarray, si: np.ndarray, sj: np.ndarray, rest: np.ndarray,
                       kspr: np.ndarray, lam: np.ndarray, dt: float, iterations: int) -> None:
     """``iterations`` Gauss-Seidel passes over the springs in storage order (in place)."""
@@ -68,7 +68,7 @@ def solve_constraints(pos: np.ndarray, w: np.ndarray, si: np.ndarray, sj: np.nda
             pos[2, b] += wb * ez
 
 
-@njit(cache=True)
+@njit(**EXACT)
 def run_xpbd(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray, free: np.ndarray, w: np.ndarray,
              blocks: np.ndarray, rest: np.ndarray, nw: int, si: np.ndarray, sj: np.ndarray, kspr: np.ndarray,
              lam: np.ndarray, gravity: np.ndarray, dt: float, f: float, phi: float, iterations: int,
