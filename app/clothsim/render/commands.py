@@ -42,7 +42,7 @@ def add_parsers(sub: argparse._SubParsersAction, bench_sub: argparse._SubParsers
     p.add_argument("--video-fps", type=float, metavar="F",
                    help="playback rate of .gif/.mp4 (default: the scene's frames_per_sec / K, real time)")
     p.add_argument("--size", metavar="WxH", help="image size in pixels (default: scene, else 800x800)")
-    p.add_argument("--samples", type=int, metavar="N", help="multisampling samples per pixel (default 4)")
+    p.add_argument("--samples", type=int, metavar="N", help="multisampling samples per pixel, 0 for none (default 4)")
     g = p.add_argument_group("camera and light")
     g.add_argument("--camera-position", nargs=3, type=float, metavar=("X", "Y", "Z"))
     g.add_argument("--camera-target", nargs=3, type=float, metavar=("X", "Y", "Z"),
@@ -88,7 +88,7 @@ def add_parsers(sub: argparse._SubParsersAction, bench_sub: argparse._SubParsers
                                          "Medians over repeats.")
     b.add_argument("scene", nargs="?", default="sphere", help="scene (default: sphere)")
     b.add_argument("--size", default="800x800", metavar="WxH", help="image size (default 800x800)")
-    b.add_argument("--samples", type=int, default=4, metavar="N", help="multisampling samples (default 4)")
+    b.add_argument("--samples", type=int, default=4, metavar="N", help="multisampling samples, 0 for none (default 4)")
     b.add_argument("--frames", type=int, default=60, metavar="N", help="timed frames per repeat (default 60)")
     b.add_argument("--repeats", type=int, default=5, metavar="R", help="repeats; the median is shown (default 5)")
     b.add_argument("--warmup", type=int, default=60, metavar="N",
@@ -303,7 +303,8 @@ def run_bench_render(args: argparse.Namespace) -> int:
     renderer = Renderer(width, height, samples=args.samples, profile=True)
     try:
         info = renderer.info()
-        print(f"bench render: {args.scene}, {width}x{height}, {renderer.samples}x MSAA, "
+        aa = f"{renderer.samples}x MSAA" if renderer.samples else "no MSAA"
+        print(f"bench render: {args.scene}, {width}x{height}, {aa}, "
               f"{info['renderer']} ({info['version']})")
         print(f"{args.frames} frames x {args.repeats} repeats per shader after {args.warmup} warm-up frames; "
               "medians; fps = render + read-back only; shares are of a whole frame incl. simulation")

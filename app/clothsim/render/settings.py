@@ -196,9 +196,9 @@ class _RenderValidator:
         if "size" in o:
             out["size"] = self.size(o["size"], "size")
         if "samples" in o:
-            n = self.integer(o["samples"], "samples", 1, 16)
+            n = self.integer(o["samples"], "samples", 0, 16)
             if n & (n - 1):
-                raise self.fail("samples", f"must be a power of two (1, 2, 4, 8, 16), got {n}")
+                raise self.fail("samples", f"must be 0 (no multisampling) or a power of two (1, 2, 4, 8, 16), got {n}")
             out["samples"] = n
         if "camera" in o:
             cam = self.obj(o["camera"], "camera", ("position", "target", "fov", "near", "far"))

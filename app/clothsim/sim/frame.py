@@ -29,20 +29,26 @@ def cloth_bounds(pos: np.ndarray, last: np.ndarray, box: np.ndarray) -> None:
     Pinned points are included: they only widen the box, which keeps the skip test exact, and
     the sweep stays contiguous (vectorised).
     """
+    # Columns of the grid as independent running minima/maxima: one running value would chain
+    # every comparison, and LLVM does not vectorise a floating-point min reduction unless NaNs
+    # are ruled out. Here the inner loop is element-wise over a row, so it vectorises.
+    n = pos.shape[1]
+    w = min(n, 64)
     for c in range(3):
-        lo = np.inf
-        hi = -np.inf
-        x = pos[c]
-        xl = last[c]
-        for p in range(x.shape[0]):
-            a = x[p]
-            b = xl[p]
-            m = a if a < b else b
-            lo = m if m < lo else lo
-            m = a if a > b else b
-            hi = m if m > hi else hi
-        box[c] = lo
-        box[3 + c] = hi
+        lo = pos[c, :w].copy()
+        hi = pos[c, :w].copy()
+        for r0 in range(0, n, w):
+            x = pos[c, r0 : r0 + w]
+            xl = last[c, r0 : r0 + w]
+            for j in range(x.shape[0]):
+                a = x[j]
+                b = xl[j]
+                m = a if a < b else b
+                lo[j] = m if m < lo[j] else lo[j]
+                m = a if a > b else b
+                hi[j] = m if m > hi[j] else hi[j]
+        box[c] = lo.min()
+        box[3 + c] = hi.max()
 
 
 @njit(**KERNEL)
