@@ -101,3 +101,18 @@ def test_missing_specular_is_caught(renderer, state):
 
     no_spec = RenderSettings(terms=("ambient", "diffuse"))
     assert not images_match(renderer.render(state, "phong", settings=no_spec), _golden("phong"))
+
+
+def test_zero_samples_turns_antialiasing_off(state, images):
+    """``samples=0`` draws the same picture into a plain framebuffer: only edge pixels differ."""
+    from clothsim.render.renderer import Renderer
+
+    plain = Renderer(GOLDEN_SIZE, GOLDEN_SIZE, samples=0)
+    try:
+        assert plain.samples == 0
+        img = plain.render(state, "phong")
+    finally:
+        plain.release()
+    diff = np.abs(img.astype(np.int16) - images["phong"].astype(np.int16)).max(axis=2)
+    assert 0 < np.count_nonzero(diff) < 0.05 * diff.size
+    assert diff.mean() < 1.0

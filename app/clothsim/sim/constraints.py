@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .forces import CHUNKS
-from .jit import KERNEL, PARALLEL
+from .jit import CHUNKS, KERNEL, PARALLEL
 
 
 @njit(inline="always", **KERNEL)
@@ -60,11 +59,6 @@ def _provot_row(pos: np.ndarray, pinned: np.ndarray, blocks: np.ndarray, rest: n
             bx[t] -= ex * excess * wb
             by[t] -= ey * excess * wb
             bz[t] -= ez * excess * wb
-
-
-def provot_bands(nh: int) -> int:
-    """How many horizontal bands :func:`provot` splits the grid into (each at least 4 rows)."""
-    return max(1, min(CHUNKS, nh // 4))
 
 
 @njit(**PARALLEL)

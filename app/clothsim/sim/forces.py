@@ -20,11 +20,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .jit import KERNEL, PARALLEL
+from .jit import CHUNKS, KERNEL, PARALLEL
 
-# Work items per pass: enough for the cores to share the work evenly, few enough that each
-# item is a long vectorised stream.
-CHUNKS = 8
 
 
 @njit(**PARALLEL)

@@ -12,8 +12,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .forces import CHUNKS
-from .jit import EXACT, KERNEL, PARALLEL
+from .jit import CHUNKS, EXACT, KERNEL, PARALLEL
 
 from .collide import collide_planes, collide_spheres
 from .constraints import provot

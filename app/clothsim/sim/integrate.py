@@ -5,8 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .forces import CHUNKS
-from .jit import PARALLEL
+from .jit import CHUNKS, PARALLEL
 
 
 @njit(**PARALLEL)

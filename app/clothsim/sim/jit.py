@@ -5,7 +5,7 @@ but keeps NaN/inf semantics, so blow-up checks and infinite bounds stay meaningf
 
 ``error_model="numpy"`` matters as much: under Numba's default ("python") every float division
 carries a zero-divisor check that raises, and that branch stops LLVM from vectorising the loop
-(the spring force loop ran 4x slower with it). The kernels guard their divisors themselves.
+(a plain sqrt-and-divide stream ran 4x slower with it). The kernels guard their divisors themselves.
 """
 
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
@@ -19,3 +19,8 @@ EXACT = {"cache": True, "error_model": "numpy"}
 #: KERNEL split over the cores with ``prange``; such kernels keep every output element a
 #: function of its own inputs, so results do not depend on the number of threads.
 PARALLEL = {**KERNEL, "parallel": True}
+
+#: Work items a PARALLEL kernel splits a pass into: enough for the cores to share the work evenly,
+#: few enough that each item is a long contiguous stream. Items are contiguous point ranges, in
+#: the same order in every pass, so a core keeps working on the points it touched last.
+CHUNKS = 8

