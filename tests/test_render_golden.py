@@ -116,3 +116,17 @@ def test_zero_samples_turns_antialiasing_off(state, images):
     diff = np.abs(img.astype(np.int16) - images["phong"].astype(np.int16)).max(axis=2)
     assert 0 < np.count_nonzero(diff) < 0.05 * diff.size
     assert diff.mean() < 1.0
+
+
+def test_renderers_side_by_side(renderer, state, images):
+    """Each renderer draws in its own context, whichever was created or released last."""
+    from clothsim.render.renderer import Renderer
+
+    other = Renderer(GOLDEN_SIZE // 2, GOLDEN_SIZE // 2, samples=0)
+    try:
+        small = other.render(state, "normal")
+        assert np.array_equal(renderer.render(state, "phong"), images["phong"])
+        assert np.array_equal(other.render(state, "normal"), small)
+    finally:
+        other.release()
+    assert np.array_equal(renderer.render(state, "custom"), images["custom"])

@@ -105,18 +105,22 @@ class Renderer:
         if look not in SHADERS:
             raise ClothsimError(f"unknown shader {look!r} (expected one of: {', '.join(SHADERS)})")
         t0 = time.perf_counter()
-        buffers = self._cloth_buffers(simulation.nw, simulation.nh)
-        mesh.update_cloth_vertices(np.ascontiguousarray(simulation.positions, dtype=np.float64),
-                                   simulation.nw, simulation.nh, look in USES_TANGENTS, buffers.vertices)
-        t1 = time.perf_counter()
-        buffers.vbo.write(buffers.vertices)
-        t2 = time.perf_counter()
-        self._draw(simulation, look, settings, buffers)
-        if self.profile:
-            self.ctx.finish()
-        t3 = time.perf_counter()
-        image = self._read()
-        t4 = time.perf_counter()
+        # GL calls go to the thread's current context: make ours current, so that several
+        # renderers (each with its own context) can be used side by side.
+        with self.ctx:
+            buffers = self._cloth_buffers(simulation.nw, simulation.nh)
+            mesh.update_cloth_vertices(np.ascontiguousarray(simulation.positions, dtype=np.float64),
+                                       simulation.nw, simulation.nh, look in USES_TANGENTS,
+                                       buffers.vertices)
+            t1 = time.perf_counter()
+            buffers.vbo.write(buffers.vertices)
+            t2 = time.perf_counter()
+            self._draw(simulation, look, settings, buffers)
+            if self.profile:
+                self.ctx.finish()
+            t3 = time.perf_counter()
+            image = self._read()
+            t4 = time.perf_counter()
         self.timings = {"mesh": t1 - t0, "upload": t2 - t1, "draw": t3 - t2, "readback": t4 - t3}
         return image
 
@@ -151,11 +155,13 @@ class Renderer:
         """GL vendor, renderer, version and GLSL version of the context."""
         from .context import describe
 
-        return describe(self.ctx)
+        with self.ctx:
+            return describe(self.ctx)
 
     def release(self) -> None:
         """Free every GL object and the context."""
-        self.programs.release()
+        with self.ctx:
+            self.programs.release()
         self.ctx.release()
 
     def __enter__(self) -> "Renderer":
@@ -269,6 +275,7 @@ class Renderer:
         self._ms_fbo.use()
         ctx.viewport = (0, 0, self.width, self.height)
         ctx.enable_only(moderngl.DEPTH_TEST)
+        ctx.front_face = "cw"  # the y flip turns counter-clockwise triangles clockwise
         ctx.wireframe = False
         bg = settings.background
         ctx.clear(bg[0], bg[1], bg[2], 1.0, depth=1.0)  # the framebuffer holds sRGB values
@@ -294,6 +301,10 @@ class Renderer:
             ctx.wireframe = True
             dim = tuple(0.45 * c for c in srgb_to_linear(settings.color))
             set_uniform(prog, "u_color", (*dim, 1.0))
+        if look != "wireframe":
+            # A sphere's far side is hidden by its near side (seen from outside): culling it
+            # halves the triangles rasterised, and small triangles dominate llvmpipe's MSAA cost.
+            ctx.enable(moderngl.CULL_FACE)
         for sphere in scene.spheres:
             vbo, ibo, _ = self._sphere(settings.sphere_resolution)
             vao = self._vao(look, "sphere", settings.sphere_resolution, lambda p: ctx.vertex_array(
@@ -303,6 +314,7 @@ class Renderer:
             model[:3, 3] = sphere.origin
             _set_matrix(prog, "u_model", model)
             vao.render(moderngl.TRIANGLES)
+        ctx.disable(moderngl.CULL_FACE)
         if scene.planes:
             # Cloth resting on a plane sits 0.0001 above it; push the plane back in depth so the
             # two never fight for the same pixels.
@@ -335,7 +347,9 @@ class Renderer:
             vao.render(moderngl.LINES, vertices=total, first=0)
 
     def _set_common_uniforms(self, prog: Any, look: str, cam: Camera, settings: RenderSettings) -> None:
-        _set_matrix(prog, "u_view_projection", cam.view_projection(self.width / self.height))
+        # Rendered upside down (clip-space y negated, winding flipped to match in _draw), so
+        # the framebuffer's bottom-up rows read back as a top-down image with no copy.
+        _set_matrix(prog, "u_view_projection", _FLIP_Y @ cam.view_projection(self.width / self.height))
         set_uniform(prog, "u_cam_pos", tuple(float(c) for c in cam.position))
         set_uniform(prog, "u_light_pos", settings.light_position)
         set_uniform(prog, "u_light_intensity", settings.light_intensity)
@@ -363,9 +377,12 @@ class Renderer:
             set_uniform(prog, "u_texture_cubemap", UNIT_CUBE)
 
     def _read(self) -> np.ndarray:
-        data = self._fbo.read(components=3, alignment=1)
-        img = np.frombuffer(data, dtype=np.uint8).reshape(self.height, self.width, 3)
-        return np.ascontiguousarray(img[::-1])  # GL's first row is the bottom one
+        image = np.empty((self.height, self.width, 3), dtype=np.uint8)
+        self._fbo.read_into(image, components=3, alignment=1)
+        return image
+
+
+_FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])
 
 
 def _set_matrix(prog: Any, name: str, m: np.ndarray) -> None:

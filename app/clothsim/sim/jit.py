@@ -8,6 +8,15 @@ carries a zero-divisor check that raises, and that branch stops LLVM from vector
 (a plain sqrt-and-divide stream ran 4x slower with it). The kernels guard their divisors themselves.
 """
 
+import os
+
+# Numba runs PARALLEL kernels on libgomp, whose idle workers spin 300,000 pause instructions
+# (about 10 ms on this machine's CPUs) before sleeping. A frame's parallel regions follow each
+# other microseconds apart, so a short spin keeps the same speed, while the default stole both
+# cores from whatever ran after a frame: llvmpipe rendered at 46 instead of 64 frames/s.
+# libgomp reads the variable when it loads (at the first parallel call); a user's value wins.
+os.environ.setdefault("GOMP_SPINCOUNT", "10000")
+
 FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 
 #: Options for kernels whose floating point may be reassociated.
