@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from clothsim.bench.accuracy import observed_order, run_problem, two_mass_exact, two_mass_scene
+from clothsim.bench.accuracy import (GROWTH_LIMIT, observed_order, perturbation_growth, problem_scene, run_problem,
+                                     two_mass_exact, two_mass_scene, well_conditioned_frames)
 from clothsim.cli import main
 from clothsim.scene import INTEGRATORS
 
@@ -16,7 +17,7 @@ EXPECTED = {"verlet": (1.8, 2.2), "symplectic_euler": (0.8, 1.2), "implicit_eule
 
 
 def test_two_mass_orders() -> None:
-    runs, orders, ref_err = run_problem("two_mass", INTEGRATORS, [8, 16, 32, 64], 0, 2, 1.0, log=lambda *_: None)
+    runs, orders, ref_err, _ = run_problem("two_mass", INTEGRATORS, [8, 16, 32, 64], 0, 2, 1.0, log=lambda *_: None)
     assert ref_err == 0.0
     for name, (lo, hi) in EXPECTED.items():
         assert lo <= orders[name] <= hi, (name, orders[name])
@@ -27,6 +28,16 @@ def test_two_mass_closed_form_at_zero() -> None:
     scene = two_mass_scene()
     pos = two_mass_exact(scene, 0.0)
     assert abs(pos[1, 0] - pos[0, 0] - 1.1) < 1e-12
+
+
+def test_pinned2_buckles_out_of_convergence_pinned4_does_not() -> None:
+    """The spec's 50 x 50 pinned2 cloth, hanging from two corners, buckles at ~0.6 s: a 1e-12
+    nudge then grows by orders of magnitude, so its 1 s state cannot converge; pinned4 stays tame."""
+    tame = perturbation_growth(problem_scene("pinned4", 50), 90, substeps=64)
+    wild = perturbation_growth(problem_scene("pinned2", 50), 90, substeps=64)
+    assert tame.max() < GROWTH_LIMIT and well_conditioned_frames(tame) == 90
+    assert wild.max() > 1e4
+    assert 30 < well_conditioned_frames(wild) < 80
 
 
 def test_observed_order_needs_two_points() -> None:
