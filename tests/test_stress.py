@@ -84,11 +84,56 @@ def test_nothing_pinned_falls(integrator: str) -> None:
     assert np.allclose(sim.positions[:, 1].mean(), 1.0 - 0.5 * 9.8 * (10 / 90) ** 2, atol=2e-3)
 
 
+def _row_cut(sim, row: int) -> np.ndarray:
+    """Mask of the springs joining rows <= row to rows > row."""
+    ri = sim.all_springs.i // sim.nw
+    rj = sim.all_springs.j // sim.nw
+    return (np.minimum(ri, rj) <= row) & (np.maximum(ri, rj) > row)
+
+
 @pytest.mark.parametrize("integrator", INTEGRATORS)
-def test_single_row_of_springs(integrator: str) -> None:
+def test_single_row_of_springs_disabled(integrator: str) -> None:
+    """Cut every spring between rows 4 and 5 of a cloth hanging from its row-0 corners: the lower
+    half must fall away (no force, no Provot limit across the cut), with finite state throughout."""
+    sim = clothsim.Simulation(grid(10).with_simulation(integrator=integrator))
+    cut = _row_cut(sim, 4)
+    assert cut.sum() == 10 + 2 * 9 + 2 * 10  # structural, shearing, bending (rows 3-5 and 4-6)
+    sim.cut_springs(cut)
+    assert len(sim.live_springs) == len(sim.springs) - cut.sum()
+    spacing = 1.0 / 9
+    sim.step(60)  # 0.67 s: a free piece falls 2.2 m
+    assert np.isfinite(sim.positions).all()
+    rows = sim.positions.reshape(10, 10, 3).mean(axis=1)
+    gap = np.linalg.norm(rows[5] - rows[4])
+    assert gap > 3 * spacing  # torn apart: Provot would hold the rows within 1.1 spacings
+    assert np.linalg.norm(rows[4] - rows[3]) < 1.5 * spacing  # the upper half still hangs together
+
+
+def test_two_rows_one_row_of_springs() -> None:
     # two rows of points: one row of vertical springs between them, no bending rows at all
     scene = load_scene("pinned2").with_cloth(num_width_points=10, num_height_points=2, pinned=((0, 0), (9, 0)))
-    assert run_or_stop(scene.with_simulation(integrator=integrator), 20) == "ran"
+    for integrator in INTEGRATORS:
+        assert run_or_stop(scene.with_simulation(integrator=integrator), 20) == "ran"
+
+
+def test_cut_springs_api() -> None:
+    scene = grid(6)
+    plain = clothsim.Simulation(scene)
+    sim = clothsim.Simulation(scene)
+    with pytest.raises(ValueError, match="mask needs"):
+        sim.cut_springs(np.ones(3, dtype=bool))
+    sim.cut_springs(_row_cut(sim, 2))
+    sim.enable_bending = False  # cuts survive a re-plan
+    sim.enable_bending = True
+    sim.step(5)
+    plain.step(5)
+    assert not np.array_equal(sim.positions, plain.positions)
+    sim.restore_springs()
+    sim.reset()
+    plain.reset()
+    sim.step(5)
+    plain.step(5)
+    assert np.array_equal(sim.positions, plain.positions)
 
 
 @pytest.mark.parametrize("mode", ["spec", "grid"])

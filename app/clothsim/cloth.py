@@ -122,14 +122,15 @@ def spring_blocks(nw: int, nh: int, structural: bool = True, shearing: bool = Tr
     return np.array(rows, dtype=np.int64).reshape(-1, 6), np.array(fams, dtype=np.int8)
 
 
-def spring_streams(nw: int, nh: int, blocks: np.ndarray, block_k: np.ndarray,
+def spring_streams(nw: int, nh: int, blocks: np.ndarray, spring_k: np.ndarray,
                    rest: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The springs as whole-grid streams, the layout the force kernel runs on.
 
     Each block's springs join point ``a`` to point ``a + offset`` with one offset per block
     (``dy * nw + dx``), so a block is one stream over ``a``: ``k[g, a]`` and ``rest[g, a]`` hold
     the stiffness and rest length of the spring starting at ``a``, or 0 where the block has no
-    spring there (a row's wrap-around pair); a zero stiffness makes no force. Returns
+    spring there (a row's wrap-around pair); a zero stiffness makes no force. ``spring_k`` and
+    ``rest`` are per spring, in block order. Returns
     ``(offsets (B,), k (B, N), rest (B, N), buffer (B, 3, N + max offset))``; the buffer holds the
     per-spring forces between the two passes of :func:`clothsim.sim.forces.accumulate_forces`
     and must start zeroed.
@@ -143,7 +144,7 @@ def spring_streams(nw: int, nh: int, blocks: np.ndarray, block_k: np.ndarray,
         length = x1 - x0
         r = np.arange(rows)[:, None]
         a = (r * nw + x0 - dx + np.arange(length)[None, :]).ravel()
-        k[g, a] = block_k[g]
+        k[g, a] = spring_k[first : first + rows * length]
         rest_s[g, a] = rest[first : first + rows * length]
     width = n + (int(offsets.max()) if count else 0)
     return offsets.astype(np.int64), k, rest_s, np.zeros((count, 3, width))

@@ -334,7 +334,7 @@ class Renderer:
                         buffers: _ClothBuffers) -> None:
         import moderngl
 
-        self._spring_buffer(sim.springs)
+        self._spring_buffer(getattr(sim, "live_springs", sim.springs))
         vao = self._vao("wireframe", "springs", None, lambda p: self.ctx.vertex_array(
             p, [(buffers.vbo, "3f 24x", "in_position")], self._spring_ibo, index_element_size=4))
         _set_matrix(prog, "u_model", np.eye(4))

@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from ..cloth import BENDING, BENDING_STIFFNESS_FACTOR
 from .collide import SURFACE_OFFSET
 from .explicit import run_symplectic, run_verlet_rate, verlet_start
 from .forces import accumulate_forces
@@ -78,7 +77,7 @@ class IntegratorState:
         self._ks = sim.ks
         self.si = np.ascontiguousarray(sp.i)
         self.sj = np.ascontiguousarray(sp.j)
-        self.kspr = np.where(sp.kind == BENDING, sim.ks * BENDING_STIFFNESS_FACTOR, sim.ks).astype(np.float64)
+        self.kspr = np.ascontiguousarray(sim.spring_k, dtype=np.float64)  # 0 for cut springs
         self.jac = np.zeros((6, len(sp)))
         self.lam = np.zeros(len(sp))
 
@@ -126,22 +125,22 @@ def advance(sim: Any, steps: int) -> None:
             verlet_start(sim._pos, sim._last, st.vel, sim._forces, sim.free, 1.0 / sim.mass, dt, c)
             st.started = True
         sim.colliders_skipped += run_verlet_rate(steps, sim._pos, sim._last, sim._forces, sim.free, sim._blocks,
-                                                 sim._stream, sim.springs.rest, sim.nw, sim.mass,
+                                                 sim._stream, sim._rest, sim.nw, sim.mass,
                                                  sim._gravity, dt, f, phi, post)
     elif name == "symplectic_euler":
         sim.colliders_skipped += run_symplectic(steps, sim._pos, sim._last, st.vel, sim._forces, sim.free,
-                                                sim._blocks, sim._stream, sim.springs.rest, sim.nw,
+                                                sim._blocks, sim._stream, sim._rest, sim.nw,
                                                 sim.mass, sim._gravity, dt, f, phi, post, fix)
     elif name == "implicit_euler":
         # Rate damping goes into the implicit system; spec damping scales the solved velocity.
         keep_after = 1.0 if c > 0.0 else f
         st.cg_iterations += run_implicit(steps, sim._pos, sim._last, st.vel, sim._forces, sim.free, st.mask,
-                                         sim._blocks, sim._stream, sim.springs.rest, sim.nw, st.si,
+                                         sim._blocks, sim._stream, sim._rest, sim.nw, st.si,
                                          st.sj, st.kspr, st.jac, st.scratch, sim.mass, sim._gravity, dt, c,
                                          keep_after, CG_TOLERANCE, CG_MAX_ITERATIONS, post, fix)
     elif name == "xpbd":
         sim.colliders_skipped += run_xpbd(steps, sim._pos, sim._last, st.vel, sim.free, st.inv_mass, sim._blocks,
-                                          sim.springs.rest, sim.nw, st.si, st.sj, st.kspr, st.lam, sim._gravity,
+                                          sim._rest, sim.nw, st.si, st.sj, st.kspr, st.lam, sim._gravity,
                                           dt, f, phi, st.iterations, post)
     else:  # the scene validator only admits the four names above
         raise ValueError(f"unknown integrator {name!r}")

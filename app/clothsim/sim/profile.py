@@ -85,7 +85,7 @@ class Profiler:
                 self.collider_skips += skips
             if sim._stretch_limit > 0:
                 t4 = t()
-                provot(pos, sim.pinned, sim._blocks, sim.springs.rest, sim.nw, sim._stretch_limit)
+                provot(pos, sim.pinned, sim._blocks, sim._rest, sim.nw, sim._stretch_limit)
                 self._add("provot", t() - t4)
         sim.frame += 1
 

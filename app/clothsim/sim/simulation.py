@@ -13,6 +13,8 @@ from .frame import run_substeps
 from .selfcollide import MODE_GRID, MODE_SPEC, table_size
 
 _SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID}
+#: Rest length given to cut springs: no cloth stretches that far, and its square stays finite.
+CUT_REST = 1e30
 
 
 class Simulation:
@@ -37,6 +39,7 @@ class Simulation:
         self.pinned = pinned_mask(cloth)
         self.free = np.flatnonzero(~self.pinned).astype(np.int32)
         self._all_springs = all_springs(self.nw, self.nh, self.initial_positions)
+        self._cut = np.zeros(len(self._all_springs), dtype=np.bool_)
         self._forces = np.zeros((3, n))
         self._spheres = np.array([[*s.origin, s.radius, s.friction] for s in scene.spheres], dtype=np.float64).reshape(-1, 5)
         self._planes = np.array([[*p.point, *p.normal, p.friction] for p in scene.planes], dtype=np.float64).reshape(-1, 7)
@@ -86,6 +89,29 @@ class Simulation:
                                 lambda self, v: self._set_sim(simulation_steps=int(v)))
 
     @property
+    def all_springs(self) -> Springs:
+        """Every spring of the grid, all three families, in the order :meth:`cut_springs` uses."""
+        return self._all_springs
+
+    def cut_springs(self, mask: np.ndarray) -> None:
+        """Cut the springs where ``mask`` (one bool per :attr:`all_springs` entry) is true.
+
+        A cut spring makes no force and Provot's limit ignores it, with every integrator: cutting
+        every spring between two rows tears the cloth in two. Cuts add up and survive
+        :meth:`reset` and changes of the ``enable_*`` flags; :meth:`restore_springs` undoes them.
+        """
+        mask = np.asarray(mask, dtype=np.bool_)
+        if mask.shape != self._cut.shape:
+            raise ValueError(f"cut_springs: mask needs {self._cut.shape[0]} entries, got shape {mask.shape}")
+        self._cut |= mask
+        self._replan()
+
+    def restore_springs(self) -> None:
+        """Undo every :meth:`cut_springs`."""
+        self._cut[:] = False
+        self._replan()
+
+    @property
     def positions(self) -> np.ndarray:
         """Current positions, (N, 3) float64: a view of the state, not a copy."""
         return self._pos.T
@@ -113,10 +139,18 @@ class Simulation:
         mask = enabled_mask(self._all_springs.kind, cloth.enable_structural, cloth.enable_shearing,
                             cloth.enable_bending)
         self.springs: Springs = self._all_springs.select(mask)
-        self._blocks, families = spring_blocks(self.nw, self.nh, cloth.enable_structural, cloth.enable_shearing,
-                                               cloth.enable_bending)
-        block_k = np.where(families == BENDING, cloth.ks * BENDING_STIFFNESS_FACTOR, cloth.ks)
-        self._stream = spring_streams(self.nw, self.nh, self._blocks, block_k, self.springs.rest)
+        self._blocks, _ = spring_blocks(self.nw, self.nh, cloth.enable_structural, cloth.enable_shearing,
+                                        cloth.enable_bending)
+        # Cut springs stay in the arrays (the kernels' block layout needs every spring of a family)
+        # with zero stiffness, so they make no force, and a rest length so long that Provot's
+        # limit never shortens them; XPBD and the implicit Jacobian skip zero stiffness.
+        cut = self._cut[mask]
+        self.spring_k = np.where(self.springs.kind == BENDING, cloth.ks * BENDING_STIFFNESS_FACTOR,
+                                 cloth.ks) * ~cut
+        self._rest = np.where(cut, CUT_REST, self.springs.rest)
+        #: The springs that act: enabled and not cut (what a wireframe should draw).
+        self.live_springs: Springs = self.springs.select(~cut) if cut.any() else self.springs
+        self._stream = spring_streams(self.nw, self.nh, self._blocks, self.spring_k, self._rest)
         self._gravity = np.asarray(sim.gravity, dtype=np.float64)
         self._keep = 1.0 - cloth.damping / 100.0
         self._self_mode = _SELF_MODES[sim.self_collision]
@@ -151,7 +185,7 @@ class Simulation:
 
     def _substep_args(self) -> tuple:
         return (self._pos, self._last, self._forces, self.free, self.pinned, self._blocks, self._stream,
-                self.springs.rest, self.nw, self.mass, self._gravity, self.dt, self._keep,
+                self._rest, self.nw, self.mass, self._gravity, self.dt, self._keep,
                 self._spheres, self._planes, SURFACE_OFFSET, self._self_mode, self.scene.cloth.thickness,
                 self.scene.simulation.simulation_steps, self._cell, self._keys, self._slots, self._start,
                 self._order, self._stretch_limit, self._box, self._sphere_on, self._plane_on)
