@@ -73,7 +73,7 @@ class Profiler:
             self._add("integrate", t2 - t1)
             if sim._self_mode:
                 self_collide(pos, free, sim.scene.cloth.thickness, steps, sim._self_mode, *sim._cell, sim._keys,
-                             sim._slots, sim._start, sim._order)
+                             sim._slots, sim._table, sim._order)
                 self._add("self-collision", t() - t2)
             n_colliders = len(sim._spheres) + len(sim._planes)
             if n_colliders:

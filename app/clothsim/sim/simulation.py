@@ -10,7 +10,7 @@ from ..errors import SimulationBlowUp
 from ..scene import Scene
 from .collide import SURFACE_OFFSET
 from .frame import run_substeps
-from .selfcollide import MODE_GRID, MODE_SPEC, table_size
+from .selfcollide import MODE_GRID, MODE_SPEC, spec_table_size, table_size
 
 _SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID}
 #: Rest length given to cut springs: no cloth stretches that far, and its square stays finite.
@@ -157,7 +157,9 @@ class Simulation:
         if sim.self_collision == "grid":
             edge = 2.0 * cloth.thickness
             self._cell = np.array([edge, edge, edge])
+            self._table = self._start
         else:
+            self._table = self._start[: spec_table_size(self.nw * self.nh) + 1]
             w = 3.0 * cloth.width / cloth.num_width_points
             h = 3.0 * cloth.height / cloth.num_height_points
             self._cell = np.array([w, h, max(w, h)])
@@ -187,7 +189,7 @@ class Simulation:
         return (self._pos, self._last, self._forces, self.free, self.pinned, self._blocks, self._stream,
                 self._rest, self.nw, self.mass, self._gravity, self.dt, self._keep,
                 self._spheres, self._planes, SURFACE_OFFSET, self._self_mode, self.scene.cloth.thickness,
-                self.scene.simulation.simulation_steps, self._cell, self._keys, self._slots, self._start,
+                self.scene.simulation.simulation_steps, self._cell, self._keys, self._slots, self._table,
                 self._order, self._stretch_limit, self._box, self._sphere_on, self._plane_on)
 
     @property
