@@ -39,6 +39,10 @@ class FixedState:
     pinned: np.ndarray
     frame: int = 0
 
+    @property
+    def live_springs(self) -> Springs:
+        return self.springs
+
 
 def draped_state() -> FixedState:
     """A cloth draped analytically over a sphere above a floor: no simulator involved, so the

@@ -112,6 +112,43 @@ def test_self_collision_pushes_a_close_pair_apart_by_the_averaged_correction():
     assert pos[0, 1] == pytest.approx(0.1005 + (2 * thickness - gap) / steps)
 
 
+def _spec_self_collision_reference(pos, free, thickness, steps, cell):
+    """The spec's pass, literally: cells from the positions at the start, points in index order,
+    each corrected in place by the average push from its cell's points closer than 2*thickness."""
+    pos = pos.copy()
+    keys = [tuple(k) for k in np.floor(pos.T / cell).astype(np.int64)]
+    dist = 2 * thickness
+    for p in free:
+        acc, count = np.zeros(3), 0
+        for q in range(pos.shape[1]):
+            if q != p and keys[q] == keys[p]:
+                d = pos[:, p] - pos[:, q]
+                length = np.linalg.norm(d)
+                if 0.0 < length < dist:
+                    acc += d * (dist - length) / length
+                    count += 1
+        if count:
+            pos[:, p] += acc / (count * steps)
+    return pos
+
+
+def test_self_collision_matches_the_sequential_pass_in_small_and_crowded_cells():
+    """A crowded cell (100 points: more than one 64-point window) and a small one (30)."""
+    rng = np.random.default_rng(7)
+    pos = np.concatenate([rng.random((3, 100)) * 0.2, 1.0 + rng.random((3, 30)) * 0.2], axis=1)
+    pos = pos[:, rng.permutation(130)].copy()
+    free = np.flatnonzero(rng.random(130) > 0.1).astype(np.int32)
+    thickness, steps = 0.02, 3
+    expected = _spec_self_collision_reference(pos, free, thickness, steps, 1.0)
+    n = pos.shape[1]
+    keys, slots, order = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
+    start = np.zeros(table_size(n) + 1, np.int64)
+    before = pos.copy()
+    self_collide(pos, free, thickness, steps, MODE_SPEC, 1.0, 1.0, 1.0, keys, slots, start, order)
+    assert (expected != before).any(axis=0).sum() > 50  # the pass has work to do in both cells
+    assert np.abs(pos - expected).max() < 1e-13
+
+
 def close_pairs(sim, distance):
     """Pairs of points closer than ``distance`` that are not grid neighbours (within 2 rows/cols)."""
     pos = sim.positions

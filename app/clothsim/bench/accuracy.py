@@ -202,17 +202,16 @@ def run_problem(problem: str, integrators: tuple[str, ...], substeps: list[int],
             when = f" (past {GROWTH_LIMIT:.0e}x at {(ok + 1) / fps:.2f} s)" if ok < frames else ""
             log(f"{problem}: a 1e-12 nudge grows {growth.max():.1e}x over {frames / fps:g} s{when}; "
                 "contact, Provot's limit and folding make the run sensitive to any perturbation")
+        elif ok < frames:
+            keep = max(1, ok)
+            log(f"{problem}: a 1e-12 nudge grows {growth[-1]:.1e}x by {frames / fps:g} s (past "
+                f"{GROWTH_LIMIT:.0e}x at {(ok + 1) / fps:.2f} s), so the state at {frames / fps:g} s is "
+                f"decided by round-off and no step size converges to it; measured at {keep / fps:.2f} s "
+                f"instead (growth {growth[keep - 1]:.1e}x)")
+            frames = keep
         else:
-            if ok < frames:
-                keep = max(1, ok)
-                log(f"{problem}: a 1e-12 nudge grows {growth[-1]:.1e}x by {frames / fps:g} s (past "
-                    f"{GROWTH_LIMIT:.0e}x at {(ok + 1) / fps:.2f} s), so the state at {frames / fps:g} s is "
-                    f"decided by round-off and no step size converges to it; measured at {keep / fps:.2f} s "
-                    f"instead (growth {growth[keep - 1]:.1e}x)")
-                frames = keep
-            else:
-                log(f"{problem}: a 1e-12 nudge grows at most {growth.max():.1e}x over {frames / fps:g} s "
-                    "(well conditioned)")
+            log(f"{problem}: a 1e-12 nudge grows at most {growth.max():.1e}x over {frames / fps:g} s "
+                "(well conditioned)")
         _, ref = simulate(scene, problem, "verlet", ref_substeps, frames)
         _, half = simulate(scene, problem, "verlet", ref_substeps // 2, frames)
         if ref is None or half is None:

@@ -40,6 +40,15 @@ def cloth_uvs(nw: int, nh: int) -> np.ndarray:
     return np.ascontiguousarray(np.stack([uu.ravel(), vv.ravel()], axis=1))
 
 
+@njit(inline="always", **EXACT)
+def _unit(x: float, y: float, z: float, fx: float, fy: float, fz: float) -> tuple[float, float, float]:
+    """(x, y, z) scaled to unit length, or the fallback (fx, fy, fz) for a zero vector."""
+    ln = math.sqrt(x * x + y * y + z * z)
+    if ln > 0.0:
+        return x / ln, y / ln, z / ln
+    return fx, fy, fz
+
+
 @njit(**EXACT)
 def update_cloth_vertices(positions, nw, nh, with_tangents, out):  # pragma: no cover - compiled
     """Fill ``out`` (N, 9) float32 with positions, unit normals and (optionally) unit tangents.
@@ -108,16 +117,7 @@ def update_cloth_vertices(positions, nw, nh, with_tangents, out):  # pragma: no 
         out[p, 0] = positions[p, 0]
         out[p, 1] = positions[p, 1]
         out[p, 2] = positions[p, 2]
-        nx = acc_n[p, 0]
-        ny = acc_n[p, 1]
-        nz = acc_n[p, 2]
-        ln = math.sqrt(nx * nx + ny * ny + nz * nz)
-        if ln > 0.0:
-            nx /= ln
-            ny /= ln
-            nz /= ln
-        else:
-            nx, ny, nz = 0.0, 1.0, 0.0
+        nx, ny, nz = _unit(acc_n[p, 0], acc_n[p, 1], acc_n[p, 2], 0.0, 1.0, 0.0)
         out[p, 3] = nx
         out[p, 4] = ny
         out[p, 5] = nz
@@ -126,16 +126,7 @@ def update_cloth_vertices(positions, nw, nh, with_tangents, out):  # pragma: no 
             ty = acc_t[p, 1]
             tz = acc_t[p, 2]
             dot = tx * nx + ty * ny + tz * nz
-            tx -= dot * nx
-            ty -= dot * ny
-            tz -= dot * nz
-            lt = math.sqrt(tx * tx + ty * ty + tz * tz)
-            if lt > 0.0:
-                tx /= lt
-                ty /= lt
-                tz /= lt
-            else:
-                tx, ty, tz = 1.0, 0.0, 0.0
+            tx, ty, tz = _unit(tx - dot * nx, ty - dot * ny, tz - dot * nz, 1.0, 0.0, 0.0)
             out[p, 6] = tx
             out[p, 7] = ty
             out[p, 8] = tz

@@ -43,6 +43,7 @@ class ClothState(Protocol):
     nh: int
     positions: np.ndarray  # (nw*nh, 3) float64, row-major
     springs: Springs
+    live_springs: Springs  # the springs that act (enabled, not cut): what the wireframe draws
 
 
 @dataclass
@@ -334,7 +335,7 @@ class Renderer:
                         buffers: _ClothBuffers) -> None:
         import moderngl
 
-        self._spring_buffer(getattr(sim, "live_springs", sim.springs))
+        self._spring_buffer(sim.live_springs)
         vao = self._vao("wireframe", "springs", None, lambda p: self.ctx.vertex_array(
             p, [(buffers.vbo, "3f 24x", "in_position")], self._spring_ibo, index_element_size=4))
         _set_matrix(prog, "u_model", np.eye(4))

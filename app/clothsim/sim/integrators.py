@@ -73,17 +73,16 @@ class IntegratorState:
     def bind_springs(self, sim: Any) -> None:
         """(Re)derive per-spring arrays when the enabled springs or ks changed."""
         sp = sim.springs
-        self._springs = sp
-        self._ks = sim.ks
+        self._spring_k = sim._spring_k  # re-made by every re-plan (ks, enable_*, cuts)
         self.si = np.ascontiguousarray(sp.i)
         self.sj = np.ascontiguousarray(sp.j)
-        self.kspr = np.ascontiguousarray(sim.spring_k, dtype=np.float64)  # 0 for cut springs
+        self.kspr = np.ascontiguousarray(sim._spring_k, dtype=np.float64)  # 0 for cut springs
         self.jac = np.zeros((6, len(sp)))
         self.lam = np.zeros(len(sp))
 
     def current(self, sim: Any) -> "IntegratorState":
         """This state, re-bound if the simulation re-planned its springs or stiffness."""
-        if self._springs is not sim.springs or self._ks != sim.ks or self.mask.shape[0] != sim.pinned.shape[0]:
+        if self._spring_k is not sim._spring_k or self.mask.shape[0] != sim.pinned.shape[0]:
             self.bind_springs(sim)
             self.inv_mass = self.mask / sim.mass
         return self

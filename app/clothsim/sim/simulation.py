@@ -145,12 +145,12 @@ class Simulation:
         # with zero stiffness, so they make no force, and a rest length so long that Provot's
         # limit never shortens them; XPBD and the implicit Jacobian skip zero stiffness.
         cut = self._cut[mask]
-        self.spring_k = np.where(self.springs.kind == BENDING, cloth.ks * BENDING_STIFFNESS_FACTOR,
+        self._spring_k = np.where(self.springs.kind == BENDING, cloth.ks * BENDING_STIFFNESS_FACTOR,
                                  cloth.ks) * ~cut
         self._rest = np.where(cut, CUT_REST, self.springs.rest)
         #: The springs that act: enabled and not cut (what a wireframe should draw).
         self.live_springs: Springs = self.springs.select(~cut) if cut.any() else self.springs
-        self._stream = spring_streams(self.nw, self.nh, self._blocks, self.spring_k, self._rest)
+        self._stream = spring_streams(self.nw, self.nh, self._blocks, self._spring_k, self._rest)
         self._gravity = np.asarray(sim.gravity, dtype=np.float64)
         self._keep = 1.0 - cloth.damping / 100.0
         self._self_mode = _SELF_MODES[sim.self_collision]
