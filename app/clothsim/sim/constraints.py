@@ -61,6 +61,37 @@ def _provot_row(pos: np.ndarray, pinned: np.ndarray, blocks: np.ndarray, rest: n
             bz[t] -= ez * excess * wb
 
 
+@njit(**KERNEL)
+def provot_bands(pos: np.ndarray, nw: int) -> int:
+    """How many horizontal bands :func:`provot` cuts the grid into."""
+    return max(1, min(CHUNKS, (pos.shape[1] // nw) // 4))
+
+
+@njit(inline="always", **KERNEL)
+def provot_band(pos: np.ndarray, pinned: np.ndarray, blocks: np.ndarray, rest: np.ndarray, nw: int,
+                limit: float, k: int, bands: int) -> None:
+    """First phase of :func:`provot`, band k: the springs lying wholly inside it."""
+    nh = pos.shape[1] // nw
+    lo = k * nh // bands
+    hi = (k + 1) * nh // bands
+    for g in range(blocks.shape[0]):
+        dy = blocks[g, 1]
+        for r in range(lo, min(hi - dy, blocks[g, 5])):
+            _provot_row(pos, pinned, blocks, rest, nw, limit, g, r)
+
+
+@njit(inline="always", **KERNEL)
+def provot_cut(pos: np.ndarray, pinned: np.ndarray, blocks: np.ndarray, rest: np.ndarray, nw: int,
+               limit: float, k: int, bands: int) -> None:
+    """Second phase of :func:`provot`, cut k (below band k): the springs crossing it."""
+    nh = pos.shape[1] // nw
+    cut = (k + 1) * nh // bands
+    for g in range(blocks.shape[0]):
+        dy = blocks[g, 1]
+        for r in range(max(cut - dy, 0), min(cut, blocks[g, 5])):
+            _provot_row(pos, pinned, blocks, rest, nw, limit, g, r)
+
+
 @njit(**PARALLEL)
 def provot(pos: np.ndarray, pinned: np.ndarray, blocks: np.ndarray, rest: np.ndarray, nw: int,
            limit: float) -> None:
@@ -77,18 +108,8 @@ def provot(pos: np.ndarray, pinned: np.ndarray, blocks: np.ndarray, rest: np.nda
     share no point either. The result is that of one fixed sequential order, whatever the
     number of threads.
     """
-    nh = pos.shape[1] // nw
-    bands = max(1, min(CHUNKS, nh // 4))
+    bands = provot_bands(pos, nw)
     for k in prange(bands):
-        lo = k * nh // bands
-        hi = (k + 1) * nh // bands
-        for g in range(blocks.shape[0]):
-            dy = blocks[g, 1]
-            for r in range(lo, min(hi - dy, blocks[g, 5])):
-                _provot_row(pos, pinned, blocks, rest, nw, limit, g, r)
+        provot_band(pos, pinned, blocks, rest, nw, limit, k, bands)
     for k in prange(bands - 1):
-        cut = (k + 1) * nh // bands
-        for g in range(blocks.shape[0]):
-            dy = blocks[g, 1]
-            for r in range(max(cut - dy, 0), min(cut, blocks[g, 5])):
-                _provot_row(pos, pinned, blocks, rest, nw, limit, g, r)
+        provot_cut(pos, pinned, blocks, rest, nw, limit, k, bands)

@@ -24,58 +24,72 @@ from .jit import CHUNKS, KERNEL, PARALLEL
 
 
 
+@njit(inline="always", **KERNEL)
+def spring_job(pos: np.ndarray, offsets: np.ndarray, k: np.ndarray, rest: np.ndarray, buf: np.ndarray,
+               job: int) -> None:
+    """Work item ``job`` of :func:`spring_pass`: one point range (``job // blocks``) of one block."""
+    n = pos.shape[1]
+    blocks = offsets.shape[0]
+    c = job // blocks
+    g = job % blocks
+    off = offsets[g]
+    m = n - off
+    lo = c * m // CHUNKS
+    hi = (c + 1) * m // CHUNKS
+    ln = hi - lo
+    ax = pos[0, lo:hi]
+    ay = pos[1, lo:hi]
+    az = pos[2, lo:hi]
+    bx = pos[0, lo + off : hi + off]
+    by = pos[1, lo + off : hi + off]
+    bz = pos[2, lo + off : hi + off]
+    kk = k[g, lo:hi]
+    rl = rest[g, lo:hi]
+    ox = buf[g, 0, lo + off : hi + off]
+    oy = buf[g, 1, lo + off : hi + off]
+    oz = buf[g, 2, lo + off : hi + off]
+    for t in range(ln):
+        ex = bx[t] - ax[t]
+        ey = by[t] - ay[t]
+        ez = bz[t] - az[t]
+        d = np.sqrt(ex * ex + ey * ey + ez * ez)
+        f = kk[t] * (d - rl[t]) / d if d > 0.0 else 0.0
+        ox[t] = f * ex
+        oy[t] = f * ey
+        oz[t] = f * ez
+
+
 @njit(**PARALLEL)
 def spring_pass(pos: np.ndarray, offsets: np.ndarray, k: np.ndarray, rest: np.ndarray, buf: np.ndarray) -> None:
     """buf[g, :, a + offset[g]] = k * (|d| - rest) * d / |d| with d = pos[b] - pos[a], b = a + offset[g]."""
-    n = pos.shape[1]
-    blocks = offsets.shape[0]
     # point range major, so each core writes the part of ``buf`` it gathers next
-    for job in prange(blocks * CHUNKS):
-        c = job // blocks
-        g = job % blocks
-        off = offsets[g]
-        m = n - off
-        lo = c * m // CHUNKS
-        hi = (c + 1) * m // CHUNKS
-        ln = hi - lo
-        ax = pos[0, lo:hi]
-        ay = pos[1, lo:hi]
-        az = pos[2, lo:hi]
-        bx = pos[0, lo + off : hi + off]
-        by = pos[1, lo + off : hi + off]
-        bz = pos[2, lo + off : hi + off]
-        kk = k[g, lo:hi]
-        rl = rest[g, lo:hi]
-        ox = buf[g, 0, lo + off : hi + off]
-        oy = buf[g, 1, lo + off : hi + off]
-        oz = buf[g, 2, lo + off : hi + off]
-        for t in range(ln):
-            ex = bx[t] - ax[t]
-            ey = by[t] - ay[t]
-            ez = bz[t] - az[t]
-            d = np.sqrt(ex * ex + ey * ey + ez * ez)
-            f = kk[t] * (d - rl[t]) / d if d > 0.0 else 0.0
-            ox[t] = f * ex
-            oy[t] = f * ey
-            oz[t] = f * ez
+    for job in prange(offsets.shape[0] * CHUNKS):
+        spring_job(pos, offsets, k, rest, buf, job)
+
+
+@njit(inline="always", **KERNEL)
+def gather_chunk(offsets: np.ndarray, buf: np.ndarray, mass: float, gravity: np.ndarray, forces: np.ndarray,
+                 c: int) -> None:
+    """Work item ``c`` of :func:`gather_pass`: the forces on the c-th of CHUNKS point ranges."""
+    n = forces.shape[1]
+    lo = c * n // CHUNKS
+    hi = (c + 1) * n // CHUNKS
+    for ax in range(3):
+        f = forces[ax, lo:hi]
+        f[:] = mass * gravity[ax]
+        for g in range(offsets.shape[0]):
+            off = offsets[g]
+            pulled = buf[g, ax, lo + off : hi + off]
+            pushed = buf[g, ax, lo:hi]
+            for t in range(hi - lo):
+                f[t] += pulled[t] - pushed[t]
 
 
 @njit(**PARALLEL)
 def gather_pass(offsets: np.ndarray, buf: np.ndarray, mass: float, gravity: np.ndarray, forces: np.ndarray) -> None:
     """forces[:, p] = mass * gravity + sum over blocks of buf[g, :, p + offset] - buf[g, :, p]."""
-    n = forces.shape[1]
     for c in prange(CHUNKS):
-        lo = c * n // CHUNKS
-        hi = (c + 1) * n // CHUNKS
-        for ax in range(3):
-            f = forces[ax, lo:hi]
-            f[:] = mass * gravity[ax]
-            for g in range(offsets.shape[0]):
-                off = offsets[g]
-                pulled = buf[g, ax, lo + off : hi + off]
-                pushed = buf[g, ax, lo:hi]
-                for t in range(hi - lo):
-                    f[t] += pulled[t] - pushed[t]
+        gather_chunk(offsets, buf, mass, gravity, forces, c)
 
 
 @njit(**KERNEL)

@@ -1,6 +1,11 @@
 """One frame = ``steps`` substeps in a single compiled call, in the spec's substep order:
 forces -> integrate -> self-collision -> colliders -> Provot.
 
+The call is run by a team of threads (:mod:`clothsim.sim.team`) that share out each pass by
+the same work items as the per-pass parallel kernels (``spring_pass``, ``verlet``, ...) and meet
+at a barrier between passes, so a substep costs a few barriers instead of a fork and join per
+pass. Those kernels stay for the other integrators.
+
 Passes a scene does not need are switched off by the caller (empty arrays, mode 0 or a
 negative limit) and never run. Colliders are tested against the cloth's bounding box first:
 a sphere the box does not reach, or a plane the box (of current and last positions) lies
@@ -15,10 +20,15 @@ from numba import njit, prange
 from .jit import CHUNKS, EXACT, KERNEL, PARALLEL
 
 from .collide import collide_planes, collide_spheres
-from .constraints import provot
-from .forces import accumulate_forces
-from .integrate import verlet
-from .selfcollide import self_collide
+from .constraints import provot_band, provot_bands, provot_cut
+from .forces import gather_chunk, spring_job
+from .integrate import verlet_chunk
+from .selfcollide import MODE_SPEC, busy_slots, cell_keys, copy_slots, repel_slots, self_collide, sort_by_slot
+from .team import barrier, roll_call, share
+
+#: Pass bits of :func:`run_substeps`: spring forces and Verlet, self-collision, colliders, Provot.
+PASS_INTEGRATE, PASS_SELF, PASS_COLLIDERS, PASS_PROVOT = 1, 2, 4, 8
+PASS_ALL = 15
 
 
 @njit(**KERNEL)
@@ -80,6 +90,20 @@ def reachable_colliders(box: np.ndarray, spheres: np.ndarray, planes: np.ndarray
     return skipped
 
 
+@njit(inline="always", **KERNEL)
+def collide_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spheres: np.ndarray, planes: np.ndarray,
+                  offset: float, sphere_on: np.ndarray, plane_on: np.ndarray, c: int) -> None:
+    """Work item ``c`` of :func:`collide_reachable`: the c-th of CHUNKS parts of the free points."""
+    n = free.shape[0]
+    part = free[c * n // CHUNKS : (c + 1) * n // CHUNKS]
+    for o in range(spheres.shape[0]):
+        if sphere_on[o]:
+            collide_spheres(pos, last, part, spheres[o : o + 1])
+    for o in range(planes.shape[0]):
+        if plane_on[o]:
+            collide_planes(pos, last, part, planes[o : o + 1], offset)
+
+
 @njit(**PARALLEL)
 def collide_reachable(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spheres: np.ndarray,
                       planes: np.ndarray, offset: float, box: np.ndarray, sphere_on: np.ndarray,
@@ -91,46 +115,132 @@ def collide_reachable(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spher
     """
     cloth_bounds(pos, last, box)
     skipped = reachable_colliders(box, spheres, planes, sphere_on, plane_on)
-    n = free.shape[0]
     for c in prange(CHUNKS):
-        part = free[c * n // CHUNKS : (c + 1) * n // CHUNKS]
-        for o in range(spheres.shape[0]):
-            if sphere_on[o]:
-                collide_spheres(pos, last, part, spheres[o : o + 1])
-        for o in range(planes.shape[0]):
-            if plane_on[o]:
-                collide_planes(pos, last, part, planes[o : o + 1], offset)
+        collide_chunk(pos, last, free, spheres, planes, offset, sphere_on, plane_on, c)
     return skipped
 
 
-@njit(**EXACT)
+@njit(**KERNEL)
+def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarray,
+            free: np.ndarray, pinned: np.ndarray, pins: np.ndarray, blocks: np.ndarray, stream: tuple,
+            rest: np.ndarray, nw: int, h2: float, mass: float, gravity: np.ndarray, keep: float,
+            spheres: np.ndarray, planes: np.ndarray, offset: float, self_mode: int, thickness: float,
+            sim_steps: int, cell: np.ndarray, keys: np.ndarray, slots: np.ndarray, start: np.ndarray,
+            order: np.ndarray, stretch_limit: float, box: np.ndarray, sphere_on: np.ndarray,
+            plane_on: np.ndarray, scratch: tuple, sync: np.ndarray, passes: int) -> None:
+    """One member's part of ``steps`` substeps; members meet at a barrier between passes."""
+    offsets, k, spring_rest, buf = stream
+    movable, busy, xs, ys, zs, ks, counts = scratch
+    spring_jobs = offsets.shape[0] * CHUNKS
+    bands = provot_bands(pos, nw)
+    dist = 2.0 * thickness
+    n = pos.shape[1]
+    table = start.shape[0] - 1
+    integrate = passes & PASS_INTEGRATE != 0
+    if passes & PASS_SELF == 0:
+        self_mode = 0
+    colliders = spheres.shape[0] + planes.shape[0] > 0 and passes & PASS_COLLIDERS != 0
+    provot_on = stretch_limit > 0.0 and passes & PASS_PROVOT != 0
+    gen = 0
+    for _ in range(steps):
+        if integrate:
+            lo, hi = share(spring_jobs, member, size)
+            for job in range(lo, hi):
+                spring_job(pos, offsets, k, spring_rest, buf, job)
+            gen = barrier(sync, size, gen)
+            # a point's force is final once gathered, so its Verlet step follows at once
+            lo, hi = share(CHUNKS, member, size)
+            for c in range(lo, hi):
+                gather_chunk(offsets, buf, mass, gravity, forces, c)
+                verlet_chunk(pos, last, forces, pins, h2, keep, c)
+                if self_mode == MODE_SPEC:
+                    # the spec's map is of the positions just integrated: bin them while in cache
+                    cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, c * n // CHUNKS,
+                              (c + 1) * n // CHUNKS)
+            gen = barrier(sync, size, gen)
+        elif self_mode == MODE_SPEC:
+            lo, hi = share(CHUNKS, member, size)
+            cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, lo * n // CHUNKS, hi * n // CHUNKS)
+            gen = barrier(sync, size, gen)
+        if self_mode == MODE_SPEC:
+            if member == 0:
+                sort_by_slot(slots, start, order)
+                counts[0] = busy_slots(start, busy)
+            gen = barrier(sync, size, gen)
+            nb = counts[0]
+            lo, hi = share(CHUNKS, member, size)
+            # a member copies the slots it works on, so their data stays in its cache
+            b0 = lo * nb // CHUNKS
+            b1 = hi * nb // CHUNKS
+            copy_slots(pos, keys, start, order, busy, xs, ys, zs, ks, b0, b1)
+            repel_slots(pos, movable, dist, sim_steps, start, order, busy, xs, ys, zs, ks, b0, b1)
+            gen = barrier(sync, size, gen)
+        elif self_mode != 0:
+            if member == 0:
+                self_collide(pos, free, thickness, sim_steps, self_mode, cell[0], cell[1], cell[2], keys, slots,
+                             start, order)
+            gen = barrier(sync, size, gen)
+        if colliders:
+            if member == 0:
+                cloth_bounds(pos, last, box)
+                counts[1] += reachable_colliders(box, spheres, planes, sphere_on, plane_on)
+            gen = barrier(sync, size, gen)
+            lo, hi = share(CHUNKS, member, size)
+            for c in range(lo, hi):
+                collide_chunk(pos, last, free, spheres, planes, offset, sphere_on, plane_on, c)
+            gen = barrier(sync, size, gen)
+        if provot_on:
+            lo, hi = share(bands, member, size)
+            for b in range(lo, hi):
+                provot_band(pos, pinned, blocks, rest, nw, stretch_limit, b, bands)
+            gen = barrier(sync, size, gen)
+            lo, hi = share(bands - 1, member, size)
+            for b in range(lo, hi):
+                provot_cut(pos, pinned, blocks, rest, nw, stretch_limit, b, bands)
+            gen = barrier(sync, size, gen)
+
+
+@njit(**PARALLEL)
 def run_substeps(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarray, free: np.ndarray,
                  pinned: np.ndarray, blocks: np.ndarray, stream: tuple, rest: np.ndarray, nw: int,
-                  mass: float, gravity: np.ndarray, dt: float, keep: float, spheres: np.ndarray,
+                 mass: float, gravity: np.ndarray, dt: float, keep: float, spheres: np.ndarray,
                  planes: np.ndarray, offset: float, self_mode: int, thickness: float, sim_steps: int,
                  cell: np.ndarray, keys: np.ndarray, slots: np.ndarray, start: np.ndarray,
                  order: np.ndarray, stretch_limit: float, box: np.ndarray, sphere_on: np.ndarray,
-                 plane_on: np.ndarray) -> int:
+                 plane_on: np.ndarray, scratch: tuple, sync: np.ndarray, size: int,
+                 passes: int = PASS_ALL) -> int:
     """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
 
     State arrays are (3, N). Springs come twice: as whole-grid streams for the forces
     (:func:`clothsim.cloth.spring_streams`) and as block rows for Provot's in-place pass
-    (:func:`clothsim.cloth.spring_blocks`).
+    (:func:`clothsim.cloth.spring_blocks`). ``scratch`` is :func:`new_scratch`'s tuple,
+    ``sync`` :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
+    :mod:`clothsim.sim.team`); the result does not depend on it.
 
     ``self_mode`` 0 turns self-collision off; ``stretch_limit`` <= 0 turns Provot off.
+    ``passes`` (PASS_* bits) runs only some passes, for :mod:`clothsim.sim.profile`.
     """
-    inv_mass = 1.0 / mass
-    has_colliders = spheres.shape[0] + planes.shape[0] > 0
     pins = np.flatnonzero(pinned)
-    skipped = 0
-    for _ in range(steps):
-        accumulate_forces(pos, forces, stream, mass, gravity)
-        verlet(pos, last, forces, pins, inv_mass, dt, keep)
-        if self_mode != 0:
-            self_collide(pos, free, thickness, sim_steps, self_mode, cell[0], cell[1], cell[2], keys, slots,
-                         start, order)
-        if has_colliders:
-            skipped += collide_reachable(pos, last, free, spheres, planes, offset, box, sphere_on, plane_on)
-        if stretch_limit > 0.0:
-            provot(pos, pinned, blocks, rest, nw, stretch_limit)
-    return skipped
+    inv_mass = 1.0 / mass
+    h2 = dt * dt * inv_mass
+    counts = scratch[6]
+    counts[1] = 0
+    sync[:] = 0
+    for member in prange(size):
+        working = roll_call(sync, size)
+        if working == size:
+            _member(member, size, steps, pos, last, forces, free, pinned, pins, blocks, stream, rest, nw, h2, mass,
+                    gravity, keep, spheres, planes, offset, self_mode, thickness, sim_steps, cell, keys, slots,
+                    start, order, stretch_limit, box, sphere_on, plane_on, scratch, sync, passes)
+        elif working == 1:
+            _member(0, 1, steps, pos, last, forces, free, pinned, pins, blocks, stream, rest, nw, h2, mass,
+                    gravity, keep, spheres, planes, offset, self_mode, thickness, sim_steps, cell, keys, slots,
+                    start, order, stretch_limit, box, sphere_on, plane_on, scratch, sync, passes)
+    return counts[1]
+
+
+def new_scratch(n_points: int, table: int, pinned: np.ndarray) -> tuple:
+    """Work arrays of :func:`run_substeps` for a cloth of ``n_points`` and a hash table of
+    ``table`` slots: (movable, busy slots, x, y, z, keys in table order, counts)."""
+    return (~pinned, np.zeros(table, dtype=np.int64), np.zeros(n_points), np.zeros(n_points), np.zeros(n_points),
+            np.zeros(n_points, dtype=np.int64), np.zeros(2, dtype=np.int64))

@@ -5,7 +5,29 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .jit import CHUNKS, PARALLEL
+from .jit import CHUNKS, KERNEL, PARALLEL
+
+
+@njit(inline="always", **KERNEL)
+def verlet_chunk(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, pins: np.ndarray, h2: float, keep: float,
+                 c: int) -> None:
+    """Work item ``c`` of :func:`verlet`: the c-th of CHUNKS point ranges, pinned points put back."""
+    n = pos.shape[1]
+    lo = c * n // CHUNKS
+    hi = (c + 1) * n // CHUNKS
+    for ax in range(3):
+        x = pos[ax, lo:hi]
+        xl = last[ax, lo:hi]
+        f = forces[ax, lo:hi]
+        for p in range(hi - lo):
+            cur = x[p]
+            x[p] = cur + keep * (cur - xl[p]) + f[p] * h2
+            xl[p] = cur
+    for k in range(pins.shape[0]):
+        q = pins[k]
+        if lo <= q < hi:
+            for ax in range(3):
+                pos[ax, q] = last[ax, q]
 
 
 @njit(**PARALLEL)
@@ -18,19 +40,6 @@ def verlet(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, pins: np.ndarr
     are put back afterwards: ``last`` holds their unchanged position, so they never move.
     """
     h2 = dt * dt * inv_mass
-    n = pos.shape[1]
-    # point range major, matching the force passes, so each core keeps its points in cache
-    for job in prange(3 * CHUNKS):
-        c = job % 3
-        lo = (job // 3) * n // CHUNKS
-        hi = (job // 3 + 1) * n // CHUNKS
-        x = pos[c, lo:hi]
-        xl = last[c, lo:hi]
-        f = forces[c, lo:hi]
-        for p in range(hi - lo):
-            cur = x[p]
-            x[p] = cur + keep * (cur - xl[p]) + f[p] * h2
-            xl[p] = cur
-    for c in range(3):
-        for k in range(pins.shape[0]):
-            pos[c, pins[k]] = last[c, pins[k]]
+    # point ranges in the same order as the force passes, so each core keeps its points in cache
+    for c in prange(CHUNKS):
+        verlet_chunk(pos, last, forces, pins, h2, keep, c)

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit, prange
+from numba.cpython.unsafe.numbers import trailing_zeros
 
 from .jit import CHUNKS, EXACT, KERNEL, PARALLEL
 
@@ -58,23 +59,32 @@ def _slot(ix: np.int64, iy: np.int64, iz: np.int64, mask: np.int64) -> np.int64:
     return ((ix * 73856093) ^ (iy * 19349663) ^ (iz * 83492791)) & mask
 
 
-@njit(**KERNEL)
-def build_map(pos: np.ndarray, cw: float, ch: float, ct: float, keys: np.ndarray, slots: np.ndarray,
-              start: np.ndarray, order: np.ndarray) -> None:
-    """Bin every point; afterwards the points of table slot k are order[start[k]:start[k+1]]."""
-    n = pos.shape[1]
-    m = start.shape[0] - 1
-    mask = np.int64(m - 1)
-    for k in range(m + 1):
-        start[k] = 0
-    for p in range(n):
+@njit(**EXACT)
+def cell_keys(pos: np.ndarray, cw: float, ch: float, ct: float, keys: np.ndarray, slots: np.ndarray,
+              table: int, lo: int, hi: int) -> None:
+    """Cell key and table slot of the points lo..hi-1 (``table`` slots, a power of two).
+
+    Compiled on its own with IEEE division: a reassociated x / w could put a point on the other
+    side of a cell boundary depending on where the loop was inlined."""
+    mask = np.int64(table - 1)
+    for p in range(lo, hi):
         ix = np.int64(np.floor(pos[0, p] / cw))
         iy = np.int64(np.floor(pos[1, p] / ch))
         iz = np.int64(np.floor(pos[2, p] / ct))
         keys[p] = _cell_key(ix, iy, iz)
-        s = _slot(ix, iy, iz, mask)
-        slots[p] = s
-        start[s + 1] += 1
+        slots[p] = _slot(ix, iy, iz, mask)
+
+
+@njit(**KERNEL)
+def sort_by_slot(slots: np.ndarray, start: np.ndarray, order: np.ndarray) -> None:
+    """Counting sort of the points by slot: the points of slot k are order[start[k]:start[k+1]],
+    in increasing index order."""
+    n = slots.shape[0]
+    m = start.shape[0] - 1
+    for k in range(m + 1):
+        start[k] = 0
+    for p in range(n):
+        start[slots[p] + 1] += 1
     for k in range(m):
         start[k + 1] += start[k]
     # Fill back to front so each slot lists its points in increasing index order. Each
@@ -86,6 +96,14 @@ def build_map(pos: np.ndarray, cw: float, ch: float, ct: float, keys: np.ndarray
     for k in range(m):
         start[k] = start[k + 1]
     start[m] = n
+
+
+@njit(**KERNEL)
+def build_map(pos: np.ndarray, cw: float, ch: float, ct: float, keys: np.ndarray, slots: np.ndarray,
+              start: np.ndarray, order: np.ndarray) -> None:
+    """Bin every point; afterwards the points of table slot k are order[start[k]:start[k+1]]."""
+    cell_keys(pos, cw, ch, ct, keys, slots, start.shape[0] - 1, 0, pos.shape[1])
+    sort_by_slot(slots, start, order)
 
 
 @njit(**KERNEL)
@@ -104,59 +122,82 @@ def _repel(pos: np.ndarray, p: int, q: int, dist: float, acc: np.ndarray) -> int
     return 0
 
 
-@njit(**PARALLEL)
-def _collide_cells(pos: np.ndarray, movable: np.ndarray, dist: float, steps: int, keys: np.ndarray,
-                   start: np.ndarray, order: np.ndarray) -> None:
-    """The spec's query, one hash-table slot at a time, the slots holding two or more points split
-    over the cores.
+@njit(**KERNEL)
+def busy_slots(start: np.ndarray, busy: np.ndarray) -> int:
+    """List the table slots holding two or more points in ``busy``; returns how many."""
+    nb = 0
+    for s in range(start.shape[0] - 1):
+        if start[s + 1] - start[s] >= 2:
+            busy[nb] = s
+            nb += 1
+    return nb
+
+
+@njit(inline="always", **KERNEL)
+def copy_slots(pos: np.ndarray, keys: np.ndarray, start: np.ndarray, order: np.ndarray, busy: np.ndarray,
+               xs: np.ndarray, ys: np.ndarray, zs: np.ndarray, ks: np.ndarray, b0: int, b1: int) -> None:
+    """Copy the positions and keys of the points of slots busy[b0:b1] into xs, ys, zs, ks in table
+    order, so that each slot's points are contiguous and the candidate loop is a vectorised
+    sweep over the slot."""
+    for b in range(b0, b1):
+        for t in range(start[busy[b]], start[busy[b] + 1]):
+            q = order[t]
+            xs[t] = pos[0, q]
+            ys[t] = pos[1, q]
+            zs[t] = pos[2, q]
+            ks[t] = keys[q]
+
+
+@njit(inline="always", **KERNEL)
+def repel_slots(pos: np.ndarray, movable: np.ndarray, dist: float, steps: int, start: np.ndarray,
+                order: np.ndarray, busy: np.ndarray, xs: np.ndarray, ys: np.ndarray, zs: np.ndarray,
+                ks: np.ndarray, b0: int, b1: int) -> None:
+    """The spec's query for the busy slots busy[b0:b1] (after :func:`copy_slots`).
 
     A point's candidates all share its slot, and only points of its own cell (same key) ever
     move it, so each slot can be finished on its own: its points are processed in increasing
     index order (the order ``build_map`` lists them in), which is exactly the sequential
-    point-order pass restricted to that cell. The slot's points are copied into contiguous
-    arrays first so that the candidate loop is a vectorised sweep over the slot.
+    point-order pass restricted to that cell.
     """
+    dist2 = dist * dist
+    for b in range(b0, b1):
+        s0 = start[busy[b]]
+        s1 = start[busy[b] + 1]
+        cx = xs[s0:s1]
+        cy = ys[s0:s1]
+        cz = zs[s0:s1]
+        ck = ks[s0:s1]
+        for i in range(s1 - s0):
+            p = order[s0 + i]
+            if not movable[p]:
+                continue
+            count, sx, sy, sz = _repel_in_cell(cx, cy, cz, ck, i, dist, dist2)
+            if count > 0:
+                scale = 1.0 / (count * steps)
+                cx[i] += sx * scale
+                cy[i] += sy * scale
+                cz[i] += sz * scale
+                pos[0, p] = cx[i]
+                pos[1, p] = cy[i]
+                pos[2, p] = cz[i]
+
+
+@njit(**PARALLEL)
+def _collide_cells(pos: np.ndarray, movable: np.ndarray, dist: float, steps: int, keys: np.ndarray,
+                   start: np.ndarray, order: np.ndarray) -> None:
+    """The spec's query over the whole table, the busy slots split over the cores."""
     n = order.shape[0]
-    m = start.shape[0] - 1
-    busy = np.empty(m, dtype=np.int64)
-    nb = 0
-    for s in range(m):
-        if start[s + 1] - start[s] >= 2:
-            busy[nb] = s
-            nb += 1
+    busy = np.empty(start.shape[0] - 1, dtype=np.int64)
     xs = np.empty(n)
     ys = np.empty(n)
     zs = np.empty(n)
     ks = np.empty(n, dtype=np.int64)
-    for t in range(n):
-        q = order[t]
-        xs[t] = pos[0, q]
-        ys[t] = pos[1, q]
-        zs[t] = pos[2, q]
-        ks[t] = keys[q]
-    dist2 = dist * dist
+    nb = busy_slots(start, busy)
     for chunk in prange(CHUNKS):
-        for b in range(chunk * nb // CHUNKS, (chunk + 1) * nb // CHUNKS):
-            s0 = start[busy[b]]
-            s1 = start[busy[b] + 1]
-            cx = xs[s0:s1]
-            cy = ys[s0:s1]
-            cz = zs[s0:s1]
-            ck = ks[s0:s1]
-            c = s1 - s0
-            for i in range(c):
-                p = order[s0 + i]
-                if not movable[p]:
-                    continue
-                count, sx, sy, sz = _repel_in_cell(cx, cy, cz, ck, i, dist, dist2)
-                if count > 0:
-                    scale = 1.0 / (count * steps)
-                    cx[i] += sx * scale
-                    cy[i] += sy * scale
-                    cz[i] += sz * scale
-                    pos[0, p] = cx[i]
-                    pos[1, p] = cy[i]
-                    pos[2, p] = cz[i]
+        b0 = chunk * nb // CHUNKS
+        b1 = (chunk + 1) * nb // CHUNKS
+        copy_slots(pos, keys, start, order, busy, xs, ys, zs, ks, b0, b1)
+        repel_slots(pos, movable, dist, steps, start, order, busy, xs, ys, zs, ks, b0, b1)
 
 
 _ONE = np.uint64(1)
@@ -186,20 +227,18 @@ def _repel_window(wx: np.ndarray, wy: np.ndarray, wz: np.ndarray, wk: np.ndarray
     sx = 0.0
     sy = 0.0
     sz = 0.0
-    j = 0
     while bits != 0:
-        if bits & _ONE:
-            dx = px - wx[j]
-            dy = py - wy[j]
-            dz = pz - wz[j]
-            length = np.sqrt(dx * dx + dy * dy + dz * dz)
-            f = (dist - length) / length
-            sx += dx * f
-            sy += dy * f
-            sz += dz * f
-            count += 1
-        bits >>= _ONE
-        j += 1
+        j = trailing_zeros(bits)
+        bits &= bits - _ONE
+        dx = px - wx[j]
+        dy = py - wy[j]
+        dz = pz - wz[j]
+        length = np.sqrt(dx * dx + dy * dy + dz * dz)
+        f = (dist - length) / length
+        sx += dx * f
+        sy += dy * f
+        sz += dz * f
+        count += 1
     return count, sx, sy, sz
 
 
@@ -247,34 +286,26 @@ def self_collide(pos: np.ndarray, free: np.ndarray, thickness: float, steps: int
         acc[1] = 0.0
         acc[2] = 0.0
         count = 0
-        if mode == MODE_SPEC:
-            key = keys[p]
-            s = slots[p]
-            for t in range(start[s], start[s + 1]):
-                q = order[t]
-                if q != p and keys[q] == key:
-                    count += _repel(pos, p, q, dist, acc)
-        else:
-            key = keys[p]
-            ix = (key >> (2 * _BITS)) & _MASK
-            iy = (key >> _BITS) & _MASK
-            iz = key & _MASK
-            # undo the 21-bit wrap to signed cell coordinates
-            if ix >= (1 << (_BITS - 1)):
-                ix -= 1 << _BITS
-            if iy >= (1 << (_BITS - 1)):
-                iy -= 1 << _BITS
-            if iz >= (1 << (_BITS - 1)):
-                iz -= 1 << _BITS
-            for ox in range(-1, 2):
-                for oy in range(-1, 2):
-                    for oz in range(-1, 2):
-                        nk = _cell_key(ix + ox, iy + oy, iz + oz)
-                        s = _slot(ix + ox, iy + oy, iz + oz, mask)
-                        for t in range(start[s], start[s + 1]):
-                            q = order[t]
-                            if q != p and keys[q] == nk:
-                                count += _repel(pos, p, q, dist, acc)
+        key = keys[p]
+        ix = (key >> (2 * _BITS)) & _MASK
+        iy = (key >> _BITS) & _MASK
+        iz = key & _MASK
+        # undo the 21-bit wrap to signed cell coordinates
+        if ix >= (1 << (_BITS - 1)):
+            ix -= 1 << _BITS
+        if iy >= (1 << (_BITS - 1)):
+            iy -= 1 << _BITS
+        if iz >= (1 << (_BITS - 1)):
+            iz -= 1 << _BITS
+        for ox in range(-1, 2):
+            for oy in range(-1, 2):
+                for oz in range(-1, 2):
+                    nk = _cell_key(ix + ox, iy + oy, iz + oz)
+                    s = _slot(ix + ox, iy + oy, iz + oz, mask)
+                    for t in range(start[s], start[s + 1]):
+                        q = order[t]
+                        if q != p and keys[q] == nk:
+                            count += _repel(pos, p, q, dist, acc)
         if count > 0:
             scale = 1.0 / (count * steps)
             pos[0, p] += acc[0] * scale

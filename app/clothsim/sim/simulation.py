@@ -8,8 +8,9 @@ from ..cloth import (BENDING, BENDING_STIFFNESS_FACTOR, Springs, all_springs, en
                      pinned_mask, spring_blocks, spring_streams)
 from ..errors import SimulationBlowUp
 from ..scene import Scene
+from . import team
 from .collide import SURFACE_OFFSET
-from .frame import run_substeps
+from .frame import new_scratch, run_substeps
 from .selfcollide import MODE_GRID, MODE_SPEC, spec_table_size, table_size
 
 _SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID}
@@ -51,6 +52,10 @@ class Simulation:
         self._slots = np.zeros(n, dtype=np.int64)
         self._start = np.zeros(m + 1, dtype=np.int64)
         self._order = np.zeros(n, dtype=np.int64)
+        self._scratch = new_scratch(n, m, self.pinned)
+        self._sync = team.new_sync()
+        #: Threads that share a frame; 1 once a frame found they could not run side by side.
+        self._team_size = team.team_size()
         self.frame = 0
         self.colliders_skipped = 0
         # Extra per-run state of the non-spec integrators (e.g. velocities); None = start afresh.
@@ -190,7 +195,8 @@ class Simulation:
                 self._rest, self.nw, self.mass, self._gravity, self.dt, self._keep,
                 self._spheres, self._planes, SURFACE_OFFSET, self._self_mode, self.scene.cloth.thickness,
                 self.scene.simulation.simulation_steps, self._cell, self._keys, self._slots, self._table,
-                self._order, self._stretch_limit, self._box, self._sphere_on, self._plane_on)
+                self._order, self._stretch_limit, self._box, self._sphere_on, self._plane_on, self._scratch,
+                self._sync, min(self._team_size, team.team_size()))
 
     @property
     def uses_spec_path(self) -> bool:
@@ -201,6 +207,8 @@ class Simulation:
     def _run(self, steps: int) -> None:
         if self.uses_spec_path:
             self.colliders_skipped += run_substeps(steps, *self._substep_args())
+            if self._sync[team.MODE] == team.ALONE:
+                self._team_size = 1
         else:
             from .integrators import advance
 
