@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .jit import CHUNKS, EXACT, KERNEL, PARALLEL
+from .jit import CHUNKS, KERNEL, PARALLEL
 
 from .collide import collide_planes, collide_spheres
 from .constraints import provot_band, provot_bands, provot_cut

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import time
 
-import numpy as np
 
 from .frame import PASS_COLLIDERS, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF, run_substeps
 
