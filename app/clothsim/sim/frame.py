@@ -38,26 +38,49 @@ def cloth_bounds(pos: np.ndarray, last: np.ndarray, box: np.ndarray) -> None:
     Pinned points are included: they only widen the box, which keeps the skip test exact, and
     the sweep stays contiguous (vectorised).
     """
-    # Columns of the grid as independent running minima/maxima: one running value would chain
+    range_bounds(pos, last, 0, pos.shape[1], box)
+
+
+@njit(inline="always", **KERNEL)
+def range_bounds(pos: np.ndarray, last: np.ndarray, lo: int, hi: int, box: np.ndarray) -> None:
+    """box = [min xyz, max xyz] over the current and last positions of the points lo..hi-1."""
+    # Columns of the range as independent running minima/maxima: one running value would chain
     # every comparison, and LLVM does not vectorise a floating-point min reduction unless NaNs
     # are ruled out. Here the inner loop is element-wise over a row, so it vectorises.
-    n = pos.shape[1]
+    n = hi - lo
+    if n <= 0:
+        box[:3] = np.inf
+        box[3:] = -np.inf
+        return
     w = min(n, 64)
     for c in range(3):
-        lo = pos[c, :w].copy()
-        hi = pos[c, :w].copy()
-        for r0 in range(0, n, w):
-            x = pos[c, r0 : r0 + w]
-            xl = last[c, r0 : r0 + w]
+        lo_c = pos[c, lo : lo + w].copy()
+        hi_c = pos[c, lo : lo + w].copy()
+        for r0 in range(lo, hi, w):
+            x = pos[c, r0 : min(r0 + w, hi)]
+            xl = last[c, r0 : min(r0 + w, hi)]
             for j in range(x.shape[0]):
                 a = x[j]
                 b = xl[j]
                 m = a if a < b else b
-                lo[j] = m if m < lo[j] else lo[j]
+                lo_c[j] = m if m < lo_c[j] else lo_c[j]
                 m = a if a > b else b
-                hi[j] = m if m > hi[j] else hi[j]
-        box[c] = lo.min()
-        box[3 + c] = hi.max()
+                hi_c[j] = m if m > hi_c[j] else hi_c[j]
+        box[c] = lo_c.min()
+        box[3 + c] = hi_c.max()
+
+
+@njit(inline="always", **KERNEL)
+def merge_bounds(boxes: np.ndarray, margin: float, box: np.ndarray) -> None:
+    """box = the union of the rows of ``boxes``, widened by ``margin`` on every side."""
+    for c in range(3):
+        lo = boxes[0, c]
+        hi = boxes[0, 3 + c]
+        for r in range(1, boxes.shape[0]):
+            lo = min(lo, boxes[r, c])
+            hi = max(hi, boxes[r, 3 + c])
+        box[c] = lo - margin
+        box[3 + c] = hi + margin
 
 
 @njit(**KERNEL)
@@ -130,7 +153,7 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
             plane_on: np.ndarray, scratch: tuple, sync: np.ndarray, passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes."""
     offsets, k, spring_rest, buf = stream
-    movable, busy, xs, ys, zs, ks, counts = scratch
+    movable, busy, xs, ys, zs, ks, counts, boxes = scratch
     spring_jobs = offsets.shape[0] * CHUNKS
     bands = provot_bands(pos, nw)
     dist = 2.0 * thickness
@@ -139,7 +162,18 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
     integrate = passes & PASS_INTEGRATE != 0
     if passes & PASS_SELF == 0:
         self_mode = 0
-    colliders = spheres.shape[0] + planes.shape[0] > 0 and passes & PASS_COLLIDERS != 0
+    have_colliders = spheres.shape[0] + planes.shape[0] > 0
+    colliders = have_colliders and passes & PASS_COLLIDERS != 0
+    # Each member tests the colliders itself (no barrier between the test and its use); member 0
+    # in the caller's arrays, the others in their own.
+    if member != 0:
+        box = np.empty(6)
+        sphere_on = np.empty(spheres.shape[0], dtype=np.bool_)
+        plane_on = np.empty(planes.shape[0], dtype=np.bool_)
+    # The chunks' boxes are taken right after Verlet, before self-collision, which moves no point
+    # by dist / sim_steps or more (an average of pushes each shorter than dist, over sim_steps):
+    # widened by that, the box still bounds the cloth the colliders see, so skipping stays exact.
+    margin = 0.0 if self_mode == 0 else 1.001 * dist / sim_steps
     provot_on = stretch_limit > 0.0 and passes & PASS_PROVOT != 0
     gen = 0
     for _ in range(steps):
@@ -157,6 +191,8 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
                     # the spec's map is of the positions just integrated: bin them while in cache
                     cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, c * n // CHUNKS,
                               (c + 1) * n // CHUNKS)
+                if have_colliders:
+                    range_bounds(pos, last, c * n // CHUNKS, (c + 1) * n // CHUNKS, boxes[c])
             gen = barrier(sync, size, gen)
         elif self_mode == MODE_SPEC:
             lo, hi = share(CHUNKS, member, size)
@@ -181,11 +217,18 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
                              start, order)
             gen = barrier(sync, size, gen)
         if colliders:
-            if member == 0:
-                cloth_bounds(pos, last, box)
-                counts[1] += reachable_colliders(box, spheres, planes, sphere_on, plane_on)
-            gen = barrier(sync, size, gen)
             lo, hi = share(CHUNKS, member, size)
+            if integrate:
+                merge_bounds(boxes, margin, box)
+            else:
+                # run on its own (profile): bound the positions as they are now
+                for c in range(lo, hi):
+                    range_bounds(pos, last, c * n // CHUNKS, (c + 1) * n // CHUNKS, boxes[c])
+                gen = barrier(sync, size, gen)
+                merge_bounds(boxes, 0.0, box)
+            skipped = reachable_colliders(box, spheres, planes, sphere_on, plane_on)
+            if member == 0:
+                counts[1] += skipped
             for c in range(lo, hi):
                 collide_chunk(pos, last, free, spheres, planes, offset, sphere_on, plane_on, c)
             gen = barrier(sync, size, gen)
@@ -241,6 +284,7 @@ def run_substeps(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarr
 
 def new_scratch(n_points: int, table: int, pinned: np.ndarray) -> tuple:
     """Work arrays of :func:`run_substeps` for a cloth of ``n_points`` and a hash table of
-    ``table`` slots: (movable, busy slots, x, y, z, keys in table order, counts)."""
+    ``table`` slots: (movable, busy slots, x, y, z, keys in table order, counts, the bounding
+    boxes of the CHUNKS point ranges)."""
     return (~pinned, np.zeros(table, dtype=np.int64), np.zeros(n_points), np.zeros(n_points), np.zeros(n_points),
-            np.zeros(n_points, dtype=np.int64), np.zeros(2, dtype=np.int64))
+            np.zeros(n_points, dtype=np.int64), np.zeros(2, dtype=np.int64), np.zeros((CHUNKS, 6)))
