@@ -149,6 +149,22 @@ def test_self_collision_matches_the_sequential_pass_in_small_and_crowded_cells()
     assert np.abs(pos - expected).max() < 1e-13
 
 
+def test_self_collision_moves_no_point_by_dist_over_steps():
+    """The frame kernel bounds the cloth for the collider test before self-collision, widened by
+    2*thickness/steps: every correction is an average of pushes shorter than 2*thickness."""
+    rng = np.random.default_rng(3)
+    pos = rng.random((3, 400)) * 0.05  # 400 points in a few cells: every point has close neighbours
+    free = np.arange(400, dtype=np.int32)
+    thickness, steps = 0.02, 3
+    keys, slots, order = np.zeros(400, np.int64), np.zeros(400, np.int64), np.zeros(400, np.int64)
+    start = np.zeros(table_size(400) + 1, np.int64)
+    before = pos.copy()
+    self_collide(pos, free, thickness, steps, MODE_SPEC, 0.03, 0.03, 0.03, keys, slots, start, order)
+    moved = np.abs(pos - before).max(axis=0)
+    assert (moved > 0).sum() > 300
+    assert moved.max() < 2 * thickness / steps
+
+
 def close_pairs(sim, distance):
     """Pairs of points closer than ``distance`` that are not grid neighbours (within 2 rows/cols)."""
     pos = sim.positions
