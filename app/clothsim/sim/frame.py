@@ -38,12 +38,13 @@ def cloth_bounds(pos: np.ndarray, last: np.ndarray, box: np.ndarray) -> None:
     Pinned points are included: they only widen the box, which keeps the skip test exact, and
     the sweep stays contiguous (vectorised).
     """
-    range_bounds(pos, last, 0, pos.shape[1], box)
+    range_bounds(pos, last, 0, pos.shape[1], box, np.empty((2, 64)))
 
 
 @njit(inline="always", **KERNEL)
-def range_bounds(pos: np.ndarray, last: np.ndarray, lo: int, hi: int, box: np.ndarray) -> None:
-    """box = [min xyz, max xyz] over the current and last positions of the points lo..hi-1."""
+def range_bounds(pos: np.ndarray, last: np.ndarray, lo: int, hi: int, box: np.ndarray, cols: np.ndarray) -> None:
+    """box = [min xyz, max xyz] over the current and last positions of the points lo..hi-1;
+    ``cols`` is (2, 64) work space."""
     # Columns of the range as independent running minima/maxima: one running value would chain
     # every comparison, and LLVM does not vectorise a floating-point min reduction unless NaNs
     # are ruled out. Here the inner loop is element-wise over a row, so it vectorises.
@@ -53,9 +54,11 @@ def range_bounds(pos: np.ndarray, last: np.ndarray, lo: int, hi: int, box: np.nd
         box[3:] = -np.inf
         return
     w = min(n, 64)
+    lo_c = cols[0, :w]
+    hi_c = cols[1, :w]
     for c in range(3):
-        lo_c = pos[c, lo : lo + w].copy()
-        hi_c = pos[c, lo : lo + w].copy()
+        lo_c[:] = pos[c, lo : lo + w]
+        hi_c[:] = lo_c
         for r0 in range(lo, hi, w):
             x = pos[c, r0 : min(r0 + w, hi)]
             xl = last[c, r0 : min(r0 + w, hi)]
@@ -68,6 +71,21 @@ def range_bounds(pos: np.ndarray, last: np.ndarray, lo: int, hi: int, box: np.nd
                 hi_c[j] = m if m > hi_c[j] else hi_c[j]
         box[c] = lo_c.min()
         box[3 + c] = hi_c.max()
+
+
+@njit(inline="always", **KERNEL)
+def member_bounds(pos: np.ndarray, last: np.ndarray, boxes: np.ndarray, cols: np.ndarray, lo: int, hi: int) -> None:
+    """Bound the points of chunks lo..hi-1 (a member's share) in one sweep into boxes[lo], and
+    empty the rows lo+1..hi-1: the union of the rows is then the cloth's box whatever the team
+    size (min and max are exact), and one long sweep vectorises where eight short ones ran at
+    half the speed."""
+    if lo >= hi:
+        return
+    n = pos.shape[1]
+    range_bounds(pos, last, lo * n // CHUNKS, hi * n // CHUNKS, boxes[lo], cols)
+    for c in range(lo + 1, hi):
+        boxes[c, :3] = np.inf
+        boxes[c, 3:] = -np.inf
 
 
 @njit(inline="always", **KERNEL)
@@ -174,6 +192,7 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
     # by dist / sim_steps or more (an average of pushes each shorter than dist, over sim_steps):
     # widened by that, the box still bounds the cloth the colliders see, so skipping stays exact.
     margin = 0.0 if self_mode == 0 else 1.001 * dist / sim_steps
+    cols = np.empty((2, 64))
     provot_on = stretch_limit > 0.0 and passes & PASS_PROVOT != 0
     gen = 0
     for _ in range(steps):
@@ -191,8 +210,8 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
                     # the spec's map is of the positions just integrated: bin them while in cache
                     cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, c * n // CHUNKS,
                               (c + 1) * n // CHUNKS)
-                if have_colliders:
-                    range_bounds(pos, last, c * n // CHUNKS, (c + 1) * n // CHUNKS, boxes[c])
+            if have_colliders:
+                member_bounds(pos, last, boxes, cols, lo, hi)
             gen = barrier(sync, size, gen)
         elif self_mode == MODE_SPEC:
             lo, hi = share(CHUNKS, member, size)
@@ -222,8 +241,7 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
                 merge_bounds(boxes, margin, box)
             else:
                 # run on its own (profile): bound the positions as they are now
-                for c in range(lo, hi):
-                    range_bounds(pos, last, c * n // CHUNKS, (c + 1) * n // CHUNKS, boxes[c])
+                member_bounds(pos, last, boxes, cols, lo, hi)
                 gen = barrier(sync, size, gen)
                 merge_bounds(boxes, 0.0, box)
             skipped = reachable_colliders(box, spheres, planes, sphere_on, plane_on)
