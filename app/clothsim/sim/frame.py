@@ -188,7 +188,7 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
         box = np.empty(6)
         sphere_on = np.empty(spheres.shape[0], dtype=np.bool_)
         plane_on = np.empty(planes.shape[0], dtype=np.bool_)
-    # The chunks' boxes are taken right after Verlet, before self-collision, which moves no point
+    # The members' boxes are taken right after Verlet, before self-collision, which moves no point
     # by dist / sim_steps or more (an average of pushes each shorter than dist, over sim_steps):
     # widened by that, the box still bounds the cloth the colliders see, so skipping stays exact.
     margin = 0.0 if self_mode == 0 else 1.001 * dist / sim_steps
@@ -302,7 +302,7 @@ def run_substeps(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarr
 
 def new_scratch(n_points: int, table: int, pinned: np.ndarray) -> tuple:
     """Work arrays of :func:`run_substeps` for a cloth of ``n_points`` and a hash table of
-    ``table`` slots: (movable, busy slots, x, y, z, keys in table order, counts, the bounding
-    boxes of the CHUNKS point ranges)."""
+    ``table`` slots: (movable, busy slots, x, y, z, keys in table order, counts, CHUNKS rows of
+    bounding boxes, see :func:`member_bounds`)."""
     return (~pinned, np.zeros(table, dtype=np.int64), np.zeros(n_points), np.zeros(n_points), np.zeros(n_points),
             np.zeros(n_points, dtype=np.int64), np.zeros(2, dtype=np.int64), np.zeros((CHUNKS, 6)))
