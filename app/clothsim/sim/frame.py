@@ -23,7 +23,7 @@ from .collide import collide_planes, collide_spheres
 from .constraints import provot_band, provot_bands, provot_cut
 from .forces import gather_chunk, spring_job
 from .integrate import verlet_chunk
-from .selfcollide import MODE_SPEC, busy_slots, cell_keys, copy_slots, repel_slots, self_collide, sort_by_slot
+from .selfcollide import MODE_SPEC, cell_keys, copy_slots, cost_share, repel_slots, self_collide, sort_by_slot
 from .team import barrier, roll_call, share
 
 #: Pass bits of :func:`run_substeps`: spring forces and Verlet, self-collision, colliders, Provot.
@@ -171,7 +171,7 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
             plane_on: np.ndarray, scratch: tuple, sync: np.ndarray, passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes."""
     offsets, k, spring_rest, buf = stream
-    movable, busy, xs, ys, zs, ks, counts, boxes = scratch
+    movable, busy, xs, ys, zs, ks, counts, boxes, cum = scratch
     spring_jobs = offsets.shape[0] * CHUNKS
     bands = provot_bands(pos, nw)
     dist = 2.0 * thickness
@@ -219,14 +219,10 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
             gen = barrier(sync, size, gen)
         if self_mode == MODE_SPEC:
             if member == 0:
-                sort_by_slot(slots, start, order)
-                counts[0] = busy_slots(start, busy)
+                counts[0] = sort_by_slot(slots, start, order, busy, cum)
             gen = barrier(sync, size, gen)
-            nb = counts[0]
-            lo, hi = share(CHUNKS, member, size)
+            b0, b1 = cost_share(cum, counts[0], member, size)
             # a member copies the slots it works on, so their data stays in its cache
-            b0 = lo * nb // CHUNKS
-            b1 = hi * nb // CHUNKS
             copy_slots(pos, keys, start, order, busy, xs, ys, zs, ks, b0, b1)
             repel_slots(pos, movable, dist, sim_steps, start, order, busy, xs, ys, zs, ks, b0, b1)
             gen = barrier(sync, size, gen)
@@ -305,4 +301,4 @@ def new_scratch(n_points: int, table: int, pinned: np.ndarray) -> tuple:
     ``table`` slots: (movable, busy slots, x, y, z, keys in table order, counts, CHUNKS rows of
     bounding boxes, see :func:`member_bounds`)."""
     return (~pinned, np.zeros(table, dtype=np.int64), np.zeros(n_points), np.zeros(n_points), np.zeros(n_points),
-            np.zeros(n_points, dtype=np.int64), np.zeros(2, dtype=np.int64), np.zeros((CHUNKS, 6)))
+            np.zeros(n_points, dtype=np.int64), np.zeros(2, dtype=np.int64), np.zeros((CHUNKS, 6)), np.zeros(table + 1, dtype=np.int64))
