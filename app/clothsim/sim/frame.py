@@ -299,6 +299,8 @@ def run_substeps(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarr
 def new_scratch(n_points: int, table: int, pinned: np.ndarray) -> tuple:
     """Work arrays of :func:`run_substeps` for a cloth of ``n_points`` and a hash table of
     ``table`` slots: (movable, busy slots, x, y, z, keys in table order, counts, CHUNKS rows of
-    bounding boxes, see :func:`member_bounds`)."""
+    bounding boxes (see :func:`member_bounds`), the busy slots' cumulative cost (see
+    :func:`clothsim.sim.selfcollide.sort_by_slot`))."""
     return (~pinned, np.zeros(table, dtype=np.int64), np.zeros(n_points), np.zeros(n_points), np.zeros(n_points),
-            np.zeros(n_points, dtype=np.int64), np.zeros(2, dtype=np.int64), np.zeros((CHUNKS, 6)), np.zeros(table + 1, dtype=np.int64))
+            np.zeros(n_points, dtype=np.int64), np.zeros(2, dtype=np.int64), np.zeros((CHUNKS, 6)),
+            np.zeros(table + 1, dtype=np.int64))
