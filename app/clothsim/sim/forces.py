@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit, prange
 
 from .jit import CHUNKS, KERNEL, PARALLEL
+from .team import share
 
 
 
@@ -34,8 +35,7 @@ def spring_job(pos: np.ndarray, offsets: np.ndarray, k: np.ndarray, rest: np.nda
     g = job % blocks
     off = offsets[g]
     m = n - off
-    lo = c * m // CHUNKS
-    hi = (c + 1) * m // CHUNKS
+    lo, hi = share(m, c, CHUNKS)
     ln = hi - lo
     ax = pos[0, lo:hi]
     ay = pos[1, lo:hi]
@@ -72,8 +72,7 @@ def gather_chunk(offsets: np.ndarray, buf: np.ndarray, mass: float, gravity: np.
                  c: int) -> None:
     """Work item ``c`` of :func:`gather_pass`: the forces on the c-th of CHUNKS point ranges."""
     n = forces.shape[1]
-    lo = c * n // CHUNKS
-    hi = (c + 1) * n // CHUNKS
+    lo, hi = share(n, c, CHUNKS)
     for ax in range(3):
         f = forces[ax, lo:hi]
         f[:] = mass * gravity[ax]

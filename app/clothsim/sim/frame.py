@@ -82,7 +82,7 @@ def member_bounds(pos: np.ndarray, last: np.ndarray, boxes: np.ndarray, cols: np
     if lo >= hi:
         return
     n = pos.shape[1]
-    range_bounds(pos, last, lo * n // CHUNKS, hi * n // CHUNKS, boxes[lo], cols)
+    range_bounds(pos, last, share(n, lo, CHUNKS)[0], share(n, hi, CHUNKS)[0], boxes[lo], cols)
     for c in range(lo + 1, hi):
         boxes[c, :3] = np.inf
         boxes[c, 3:] = -np.inf
@@ -136,7 +136,8 @@ def collide_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spheres: 
                   offset: float, sphere_on: np.ndarray, plane_on: np.ndarray, c: int) -> None:
     """Work item ``c`` of :func:`collide_reachable`: the c-th of CHUNKS parts of the free points."""
     n = free.shape[0]
-    part = free[c * n // CHUNKS : (c + 1) * n // CHUNKS]
+    f0, f1 = share(n, c, CHUNKS)
+    part = free[f0:f1]
     for o in range(spheres.shape[0]):
         if sphere_on[o]:
             collide_spheres(pos, last, part, spheres[o : o + 1])
@@ -208,14 +209,15 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
                 verlet_chunk(pos, last, forces, pins, h2, keep, c)
                 if self_mode == MODE_SPEC:
                     # the spec's map is of the positions just integrated: bin them while in cache
-                    cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, c * n // CHUNKS,
-                              (c + 1) * n // CHUNKS)
+                    p0, p1 = share(n, c, CHUNKS)
+                    cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, p0, p1)
             if have_colliders:
                 member_bounds(pos, last, boxes, cols, lo, hi)
             gen = barrier(sync, size, gen)
         elif self_mode == MODE_SPEC:
             lo, hi = share(CHUNKS, member, size)
-            cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, lo * n // CHUNKS, hi * n // CHUNKS)
+            cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, share(n, lo, CHUNKS)[0],
+                      share(n, hi, CHUNKS)[0])
             gen = barrier(sync, size, gen)
         if self_mode == MODE_SPEC:
             if member == 0:

@@ -6,6 +6,7 @@ import numpy as np
 from numba import njit, prange
 
 from .jit import CHUNKS, KERNEL, PARALLEL
+from .team import share
 
 
 @njit(inline="always", **KERNEL)
@@ -13,8 +14,7 @@ def verlet_chunk(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, pins: np
                  c: int) -> None:
     """Work item ``c`` of :func:`verlet`: the c-th of CHUNKS point ranges, pinned points put back."""
     n = pos.shape[1]
-    lo = c * n // CHUNKS
-    hi = (c + 1) * n // CHUNKS
+    lo, hi = share(n, c, CHUNKS)
     for ax in range(3):
         x = pos[ax, lo:hi]
         xl = last[ax, lo:hi]

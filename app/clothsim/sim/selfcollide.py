@@ -23,6 +23,7 @@ from numba import njit, prange
 from numba.cpython.unsafe.numbers import trailing_zeros
 
 from .jit import CHUNKS, EXACT, KERNEL, PARALLEL
+from .team import share
 
 MODE_SPEC = 1
 MODE_GRID = 2
@@ -261,8 +262,7 @@ def _collide_cells(pos: np.ndarray, movable: np.ndarray, dist: float, steps: int
     zs = np.empty(n)
     ks = np.empty(n, dtype=np.int64)
     for chunk in prange(CHUNKS):
-        b0 = chunk * nb // CHUNKS
-        b1 = (chunk + 1) * nb // CHUNKS
+        b0, b1 = share(nb, chunk, CHUNKS)
         copy_slots(pos, keys, start, order, busy, xs, ys, zs, ks, b0, b1)
         repel_slots(pos, movable, dist, steps, start, order, busy, xs, ys, zs, ks, b0, b1)
 
