@@ -95,10 +95,10 @@ def cell_keys(pos: np.ndarray, cw: float, ch: float, ct: float, keys: np.ndarray
 
 
 @njit(**KERNEL)
-def sort_by_slot(slots: np.ndarray, start: np.ndarray, order: np.ndarray, busy: np.ndarray, cum: np.ndarray) -> int:
+def sort_by_slot(slots: np.ndarray, start: np.ndarray, order: np.ndarray, busy: np.ndarray) -> int:
     """Counting sort of the points by slot: the points of slot k are order[start[k]:start[k+1]],
     in increasing index order. Also lists the slots holding two or more points in busy[:nb]
-    (returns nb) with cum[b] = the estimated query cost of busy[:b] (see :func:`cost_share`)."""
+    (returns nb). (A frame's team sorts with :func:`place_slots` and :func:`scatter_slots`.)"""
     n = slots.shape[0]
     m = start.shape[0] - 1
     start[:] = 0
@@ -108,15 +108,12 @@ def sort_by_slot(slots: np.ndarray, start: np.ndarray, order: np.ndarray, busy: 
     # entry + 1, which is where slot k + 1 starts, so no pass shifts the bounds afterwards
     total = 0
     nb = 0
-    cum[0] = 0
     for k in range(m):
         c = start[k + 1]
         start[k + 1] = total
         total += c
         if c >= 2:
             busy[nb] = k
-            # a sweep over the slot per point, plus a fixed cost per point
-            cum[nb + 1] = cum[nb] + c * (c + 32)
             nb += 1
     for p in range(n):
         s = slots[p] + 1
@@ -125,13 +122,100 @@ def sort_by_slot(slots: np.ndarray, start: np.ndarray, order: np.ndarray, busy: 
     return nb
 
 
+@njit(inline="always", **KERNEL)
+def count_slots(slots: np.ndarray, hist: np.ndarray, lo: int, hi: int) -> None:
+    """hist[k] += the number of the points lo..hi-1 in slot k."""
+    for p in range(lo, hi):
+        hist[slots[p]] += 1
+
+
+@njit(inline="always", **KERNEL)
+def place_slots(hist: np.ndarray, cursor: np.ndarray, start: np.ndarray, busy: np.ndarray, cum: np.ndarray, t0: int,
+                t1: int) -> tuple[int, int]:
+    """The prefix pass of a counting sort split over a team, for the table slots t0..t1-1.
+
+    ``hist[j, k]`` holds how many of member j's points (a run of point indices, member j's after
+    member j-1's) fall in slot k; cursor[j, k] becomes where member j's first point of slot k
+    goes, so that :func:`scatter_slots` leaves every slot in increasing index order, as
+    :func:`sort_by_slot` does. (The counts stay as they are: the other members read those before
+    t0 at the same time.) start[k] becomes the slot's first entry (start[t1] too when t1 is the
+    table's end); the slots holding two or more points are listed in busy[t0:t0 + nb], and
+    cum[t0 + b] is the estimated query cost of busy[t0:t0 + b + 1]. Returns nb and the range's
+    cost (see :func:`query_share`).
+    """
+    base = 0
+    cost = 0
+    for j in range(hist.shape[0]):
+        for k in range(t0):
+            base += hist[j, k]
+    nb = 0
+    for k in range(t0, t1):
+        first = base
+        start[k] = first
+        for j in range(hist.shape[0]):
+            cursor[j, k] = base
+            base += hist[j, k]
+        c = base - first
+        if c >= 2:
+            busy[t0 + nb] = k
+            # a sweep over the slot per point, plus a fixed cost per point
+            cost += c * (c + 32)
+            cum[t0 + nb] = cost
+            nb += 1
+    if t1 == start.shape[0] - 1:
+        start[t1] = base
+    return nb, cost
+
+
+@njit(inline="always", **KERNEL)
+def query_share(cum: np.ndarray, tally: np.ndarray, table: int, r: int, member: int, size: int) -> tuple[int, int]:
+    """Member ``member``'s part of the busy slots of table range r (see :func:`place_slots`; tally[j]
+    holds range j's busy count and cost), as indices into busy[t0:t0 + nb]: the busy slots of all
+    ranges, in range order, are shared out by estimated cost, a slot going to the member whose
+    share its first unit of cost falls in."""
+    total = 0
+    before = 0
+    for j in range(size):
+        if j < r:
+            before += tally[j, 1]
+        total += tally[j, 1]
+    t0 = share(table, r, size)[0]
+    nb = tally[r, 0]
+    return (_first_from(cum[t0 : t0 + nb], member * total // size - before),
+            _first_from(cum[t0 : t0 + nb], (member + 1) * total // size - before))
+
+
+@njit(inline="always", **KERNEL)
+def _first_from(cum: np.ndarray, x: int) -> int:
+    """The first busy slot whose cost starts at x or later (cum: inclusive running costs)."""
+    if x <= 0:
+        return 0
+    return min(1 + np.searchsorted(cum[: cum.shape[0] - 1], x), cum.shape[0])
+
+
+@njit(inline="always", **KERNEL)
+def scatter_slots(pos: np.ndarray, keys: np.ndarray, slots: np.ndarray, cursor: np.ndarray, order: np.ndarray,
+                  xs: np.ndarray, ys: np.ndarray, zs: np.ndarray, ks: np.ndarray, lo: int, hi: int) -> None:
+    """Put the points lo..hi-1 in their slots (``cursor`` is the member's row made by
+    :func:`place_slots`), their positions and keys copied alongside as :func:`copy_slots` does."""
+    for p in range(lo, hi):
+        s = slots[p]
+        t = cursor[s]
+        cursor[s] = t + 1
+        order[t] = p
+        xs[t] = pos[0, p]
+        ys[t] = pos[1, p]
+        zs[t] = pos[2, p]
+        ks[t] = keys[p]
+
+
 @njit(**KERNEL)
 def build_map(pos: np.ndarray, cw: float, ch: float, ct: float, keys: np.ndarray, slots: np.ndarray,
-              start: np.ndarray, order: np.ndarray, busy: np.ndarray, cum: np.ndarray) -> int:
+              start: np.ndarray, order: np.ndarray, busy: np.ndarray) -> int:
     """Bin every point; afterwards the points of table slot k are order[start[k]:start[k+1]] (see
     :func:`sort_by_slot`, whose busy-slot count it returns)."""
     cell_keys(pos, cw, ch, ct, keys, slots, start.shape[0] - 1, 0, pos.shape[1])
-    return sort_by_slot(slots, start, order, busy, cum)
+    return sort_by_slot(slots, start, order, busy)
 
 
 @njit(**KERNEL)
@@ -148,17 +232,6 @@ def _repel(pos: np.ndarray, p: int, q: int, dist: float, acc: np.ndarray) -> int
         acc[2] += dz * s
         return 1
     return 0
-
-
-@njit(inline="always", **KERNEL)
-def cost_share(cum: np.ndarray, nb: int, member: int, size: int) -> tuple[int, int]:
-    """Member ``member``'s run of busy slots, of about 1/size of their estimated cost; every member
-    computes the same bounds. Balanced by cost, two threads ran selfCollision 1 % faster than split
-    by slot count."""
-    total = cum[nb]
-    lo = np.searchsorted(cum[: nb + 1], member * total // size)
-    hi = np.searchsorted(cum[: nb + 1], (member + 1) * total // size)
-    return lo, hi
 
 
 @njit(inline="always", **KERNEL)
@@ -312,7 +385,7 @@ def self_collide(pos: np.ndarray, free: np.ndarray, thickness: float, steps: int
                  order: np.ndarray) -> None:
     """Build the map from the current positions, then repel close pairs (see module doc)."""
     busy = np.empty(start.shape[0] - 1, dtype=np.int64)
-    nb = build_map(pos, cw, ch, ct, keys, slots, start, order, busy, np.empty(start.shape[0], dtype=np.int64))
+    nb = build_map(pos, cw, ch, ct, keys, slots, start, order, busy)
     dist = 2.0 * thickness
     if mode == MODE_SPEC:
         movable = np.zeros(pos.shape[1], dtype=np.bool_)
