@@ -230,10 +230,11 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
             gen = barrier(sync, size, gen)
         if self_mode == MODE_SPEC:
             # A counting sort split over the team: each member places the slots of its part of the
-            # table, then puts its own points in place. The points' owners copy them into the slots
-            # (their positions are in its cache): 2.48 ms a frame on selfCollision, against 2.68
-            # when the member repelling a slot copied it, and 2.53 with one member sorting alone.
-            # Then the busy slots are shared out by estimated cost.
+            # table, then puts its own points in place. A point's owner copies it into its slot
+            # (its position is in the owner's cache): on selfCollision 2.47-2.49 ms a frame (medians
+            # of 15 x 30 frames from frame 60), against 2.68-2.70 when the member repelling a slot
+            # copied it, and 2.50-2.56 with one member sorting alone. Then the busy slots of all
+            # parts are shared out by estimated cost.
             t0, t1 = share(table, member, size)
             tally[member, 0], tally[member, 1] = place_slots(hist, cursor, start, busy, cum, t0, t1)
             gen = barrier(sync, size, gen)
