@@ -173,7 +173,7 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
             plane_on: np.ndarray, scratch: tuple, sorting: tuple, sync: np.ndarray, passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes."""
     offsets, k, spring_rest, buf = stream
-    movable, busy, xs, ys, zs, ks, counts, boxes, cum = scratch
+    movable, busy, xs, ys, zs, ks, skips, boxes, cum = scratch
     spring_jobs = offsets.shape[0] * CHUNKS
     # a member alone (see team.roll_call) sorts with one row of counts, not the team's
     counted, tally = sorting
@@ -264,7 +264,7 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
                 merge_bounds(boxes, 0.0, box)
             skipped = reachable_colliders(box, spheres, planes, sphere_on, plane_on)
             if member == 0:
-                counts[1] += skipped
+                skips[0] += skipped
             for c in range(lo, hi):
                 collide_chunk(pos, last, free, spheres, planes, offset, sphere_on, plane_on, c)
             gen = barrier(sync, size, gen)
@@ -302,8 +302,8 @@ def run_substeps(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarr
     pins = np.flatnonzero(pinned)
     inv_mass = 1.0 / mass
     h2 = dt * dt * inv_mass
-    counts = scratch[6]
-    counts[1] = 0
+    skips = scratch[6]
+    skips[0] = 0
     sync[:] = 0
     # the team's counting sort: counts and cursors per member and slot, busy slots and cost per range
     rows = size if self_mode == MODE_SPEC else 0
@@ -318,14 +318,14 @@ def run_substeps(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarr
             _member(0, 1, steps, pos, last, forces, free, pinned, pins, blocks, stream, rest, nw, h2, mass,
                     gravity, keep, spheres, planes, offset, self_mode, thickness, sim_steps, cell, keys, slots,
                     start, order, stretch_limit, box, sphere_on, plane_on, scratch, sorting, sync, passes)
-    return counts[1]
+    return skips[0]
 
 
 def new_scratch(n_points: int, table: int, pinned: np.ndarray) -> tuple:
     """Work arrays of :func:`run_substeps` for a cloth of ``n_points`` and a hash table of
-    ``table`` slots: (movable, busy slots, x, y, z, keys in table order, counts, CHUNKS rows of
-    bounding boxes (see :func:`member_bounds`), the busy slots' running cost per table range (see
-    :func:`clothsim.sim.selfcollide.place_slots`))."""
+    ``table`` slots: (movable, busy slots, x, y, z, keys in table order, colliders skipped (one
+    counter), CHUNKS rows of bounding boxes (see :func:`member_bounds`), the busy slots' running
+    cost per table range (see :func:`clothsim.sim.selfcollide.place_slots`))."""
     return (~pinned, np.zeros(table, dtype=np.int64), np.zeros(n_points), np.zeros(n_points), np.zeros(n_points),
-            np.zeros(n_points, dtype=np.int64), np.zeros(2, dtype=np.int64), np.zeros((CHUNKS, 6)),
+            np.zeros(n_points, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros((CHUNKS, 6)),
             np.zeros(table, dtype=np.int64))
