@@ -199,6 +199,10 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
     margin = 0.0 if self_mode == 0 else 1.001 * dist / sim_steps
     cols = np.empty((2, 64))
     provot_on = stretch_limit > 0.0 and passes & PASS_PROVOT != 0
+    # the member's own points (its chunks) and its part of the hash table
+    c0, c1 = share(CHUNKS, member, size)
+    own0, own1 = share(n, c0, CHUNKS)[0], share(n, c1, CHUNKS)[0]
+    t0, t1 = share(table, member, size)
     gen = 0
     for _ in range(steps):
         if integrate:
@@ -222,11 +226,9 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
                 member_bounds(pos, last, boxes, cols, lo, hi)
             gen = barrier(sync, size, gen)
         elif self_mode == MODE_SPEC:
-            lo, hi = share(CHUNKS, member, size)
-            p0, p1 = share(n, lo, CHUNKS)[0], share(n, hi, CHUNKS)[0]
-            cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, p0, p1)
+            cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, own0, own1)
             hist[member] = 0
-            count_slots(slots, hist[member], p0, p1)
+            count_slots(slots, hist[member], own0, own1)
             gen = barrier(sync, size, gen)
         if self_mode == MODE_SPEC:
             # A counting sort split over the team: each member places the slots of its part of the
@@ -235,12 +237,9 @@ def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarra
             # of 15 x 30 frames from frame 60), against 2.68-2.70 when the member repelling a slot
             # copied it, and 2.50-2.56 with one member sorting alone. Then the busy slots of all
             # parts are shared out by estimated cost.
-            t0, t1 = share(table, member, size)
             tally[member, 0], tally[member, 1] = place_slots(hist, cursor, start, busy, cum, t0, t1)
             gen = barrier(sync, size, gen)
-            lo, hi = share(CHUNKS, member, size)
-            scatter_slots(pos, keys, slots, cursor[member], order, xs, ys, zs, ks, share(n, lo, CHUNKS)[0],
-                          share(n, hi, CHUNKS)[0])
+            scatter_slots(pos, keys, slots, cursor[member], order, xs, ys, zs, ks, own0, own1)
             gen = barrier(sync, size, gen)
             for r in range(size):
                 i0, i1 = query_share(cum, tally, table, r, member, size)

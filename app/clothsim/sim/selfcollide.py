@@ -262,11 +262,12 @@ def copy_slots(pos: np.ndarray, keys: np.ndarray, start: np.ndarray, order: np.n
 def repel_slots(pos: np.ndarray, movable: np.ndarray, dist: float, steps: int, start: np.ndarray,
                 order: np.ndarray, busy: np.ndarray, xs: np.ndarray, ys: np.ndarray, zs: np.ndarray,
                 ks: np.ndarray, b0: int, b1: int) -> None:
-    """The spec's query for the busy slots busy[b0:b1] (after :func:`copy_slots`).
+    """The spec's query for the busy slots busy[b0:b1] (after :func:`copy_slots`, or the team's
+    :func:`scatter_slots`).
 
     A point's candidates all share its slot, and only points of its own cell (same key) ever
     move it, so each slot can be finished on its own: its points are processed in increasing
-    index order (the order ``build_map`` lists them in), which is exactly the sequential
+    index order (the order both sorts list them in), which is exactly the sequential
     point-order pass restricted to that cell.
     """
     dist2 = dist * dist
