@@ -149,6 +149,21 @@ def test_self_collision_matches_the_sequential_pass_in_small_and_crowded_cells()
     assert np.abs(pos - expected).max() < 1e-13
 
 
+def test_self_collision_sees_a_point_pushed_into_reach_earlier_in_the_pass():
+    """Point 0 is pushed by point 1 towards point 2, which starts just out of reach (0.025 > 2
+    thickness) and is within it once point 0 has moved: the in-place pass must push point 2 too."""
+    thickness, steps = 0.01, 2
+    pos = np.array([[0.5, 0.499, 0.525], [0.5, 0.5, 0.5], [0.5, 0.5, 0.5]])
+    free = np.arange(3, dtype=np.int32)
+    expected = _spec_self_collision_reference(pos, free, thickness, steps, 1.0)
+    keys, slots, order = np.zeros(3, np.int64), np.zeros(3, np.int64), np.zeros(3, np.int64)
+    start = np.zeros(table_size(3) + 1, np.int64)
+    self_collide(pos, free, thickness, steps, MODE_SPEC, 1.0, 1.0, 1.0, keys, slots, start, order)
+    assert pos[0, 0] == pytest.approx(0.5 + (0.02 - 0.001) / 2)
+    assert pos[0, 2] == pytest.approx(0.525 + (0.02 - (0.525 - pos[0, 0])) / 2)
+    assert np.abs(pos - expected).max() < 1e-15
+
+
 def test_self_collision_moves_no_point_by_dist_over_steps():
     """The frame kernel bounds the cloth for the collider test before self-collision, widened by
     2*thickness/steps: every correction is an average of pushes shorter than 2*thickness."""

@@ -24,7 +24,7 @@ from .constraints import provot_band, provot_bands, provot_cut
 from .forces import gather_chunk, spring_job
 from .integrate import verlet_chunk
 from .selfcollide import (MODE_SPEC, cell_keys, count_slots, place_slots, repel_slots, scatter_slots, query_share,
-                          self_collide)
+                          self_collide, slot_copies)
 from .team import barrier, roll_call, share
 
 #: Pass bits of :func:`run_substeps`: spring forces and Verlet, self-collision, colliders, Provot.
@@ -325,6 +325,5 @@ def new_scratch(n_points: int, table: int, pinned: np.ndarray) -> tuple:
     ``table`` slots: (movable, busy slots, x, y, z, keys in table order, colliders skipped (one
     counter), CHUNKS rows of bounding boxes (see :func:`member_bounds`), the busy slots' running
     cost per table range (see :func:`clothsim.sim.selfcollide.place_slots`))."""
-    return (~pinned, np.zeros(table, dtype=np.int64), np.zeros(n_points), np.zeros(n_points), np.zeros(n_points),
-            np.zeros(n_points, dtype=np.int64), np.zeros(1, dtype=np.int64), np.zeros((CHUNKS, 6)),
-            np.zeros(table, dtype=np.int64))
+    return (~pinned, np.zeros(table, dtype=np.int64), *slot_copies(n_points), np.zeros(1, dtype=np.int64),
+            np.zeros((CHUNKS, 6)), np.zeros(table, dtype=np.int64))
