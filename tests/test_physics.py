@@ -149,6 +149,26 @@ def test_self_collision_matches_the_sequential_pass_in_small_and_crowded_cells()
     assert np.abs(pos - expected).max() < 1e-13
 
 
+@pytest.mark.parametrize("sizes", [(64, 57, 9), (8, 2, 63, 17), (65, 1, 16)])
+def test_self_collision_matches_the_sequential_pass_at_every_cell_size(sizes):
+    """Cells of these many points, one cell per unit cube: full 64-point masks, cells that are and
+    are not a whole number of 8-wide vectors, and a 65-point cell taken 64 candidates at a time."""
+    rng = np.random.default_rng(sum(sizes))
+    pos = np.concatenate([rng.random((3, c)) * 0.1 + [[2.0 * i], [0.5], [0.5]] for i, c in enumerate(sizes)],
+                         axis=1)
+    n = pos.shape[1]
+    pos = pos[:, rng.permutation(n)].copy()
+    free = np.flatnonzero(rng.random(n) > 0.1).astype(np.int32)
+    thickness, steps = 0.01, 3
+    expected = _spec_self_collision_reference(pos, free, thickness, steps, 1.0)
+    keys, slots, order = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
+    start = np.zeros(table_size(n) + 1, np.int64)
+    before = pos.copy()
+    self_collide(pos, free, thickness, steps, MODE_SPEC, 1.0, 1.0, 1.0, keys, slots, start, order)
+    assert (expected != before).any(axis=0).sum() > n // 4
+    assert np.abs(pos - expected).max() < 1e-13
+
+
 def test_self_collision_sees_a_point_pushed_into_reach_earlier_in_the_pass():
     """Point 0 is pushed by point 1 towards point 2, which starts just out of reach (0.025 > 2
     thickness) and is within it once point 0 has moved: the in-place pass must push point 2 too."""

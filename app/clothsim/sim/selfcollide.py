@@ -289,6 +289,7 @@ def repel_slots(pos: np.ndarray, movable: np.ndarray, dist: float, steps: int, s
     # ``steps``: so a pair closer than dist at either point's turn was closer than
     # dist * (1 + 1/steps) before the slot was touched (widened a little against rounding).
     reach = dist * (1.0 + 1.0 / steps) * 1.001
+    reach2 = reach * reach
     near = np.empty(64, dtype=np.uint64)
     for b in range(b0, b1):
         s0 = start[busy[b]]
@@ -300,7 +301,7 @@ def repel_slots(pos: np.ndarray, movable: np.ndarray, dist: float, steps: int, s
             # The entries read past the slot may be another member's slot being corrected: their
             # values never matter, as their keys never match this slot's.
             s8 = s0 + ((s1 - s0 + 7) & ~7)
-            _repel_slot(pos, movable, dist, dist2, reach * reach, steps, points, xs[s0:s8], ys[s0:s8], zs[s0:s8],
+            _repel_slot(pos, movable, dist, dist2, reach2, steps, points, xs[s0:s8], ys[s0:s8], zs[s0:s8],
                         ks[s0:s8], near)
         else:
             _repel_big_slot(pos, movable, dist, dist2, steps, points, xs[s0:s1], ys[s0:s1], zs[s0:s1], ks[s0:s1])
@@ -317,9 +318,10 @@ def _repel_slot(pos: np.ndarray, movable: np.ndarray, dist: float, dist2: float,
     First every pair of the slot is tested at once against ``reach2``, from the positions before
     the slot's corrections, into one 64-bit row per point (``near``); then each point in turn
     checks only the marked points, at their current positions, against dist. Two passes because
-    the first is a plain element-wise sweep of whole 8-wide vectors: the one-pass sweep per point
-    OR-reduces its mask, which LLVM vectorises four vectors at a time, so a slot of 9-20 points
-    ran in the scalar remainder (query replayed on one thread: 67 -> 50 us per substep).
+    the first is a plain element-wise sweep of whole 8-wide vectors, while a sweep per point
+    OR-reduces a mask, which ran no faster on slots of 9-20 points when they were padded to whole
+    vectors (query replayed on one thread: 67 us per substep one pass, 91 padded, 50 in two
+    passes, 70 in two passes unpadded).
     """
     n = points.shape[0]
     m = cx.shape[0]
