@@ -6,16 +6,27 @@ the same work items as the per-pass parallel kernels (``spring_pass``, ``verlet`
 at a barrier between passes, so a substep costs a few barriers instead of a fork and join per
 pass. Those kernels stay for the other integrators.
 
-Passes a scene does not need are switched off by the caller (empty arrays, mode 0 or a
-negative limit) and never run. Colliders are tested against the cloth's bounding box first:
-a sphere the box does not reach, or a plane the box (of current and last positions) lies
-wholly on one side of, cannot act this substep and is skipped exactly.
+The state comes as a few named tuples (see :mod:`clothsim.sim.state`): the cloth's arrays and
+constants, and one group per optional pass (the spec's self-collision hash, the 27-cell grid
+search, the colliders), each ``None`` when the scene does not use it. Numba prunes the branches of
+an argument that is ``None`` before typing, so a scene's kernel is compiled with only its own
+passes, and a new feature adds a field or a group, not a dozen positional arguments.
+
+Colliders are tested against the cloth's bounding box first: a sphere the box does not reach, or
+a plane the box (of current and last positions) lies wholly on one side of, cannot act this
+substep and is skipped exactly.
 """
 
 from __future__ import annotations
 
+from functools import lru_cache
+
+import numba
 import numpy as np
-from numba import njit, prange
+from llvmlite import ir
+from numba import njit, prange, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from .jit import CHUNKS, KERNEL, PARALLEL
 
@@ -23,9 +34,8 @@ from .collide import collide_planes, collide_spheres
 from .constraints import provot_band, provot_bands, provot_cut
 from .forces import gather_chunk, spring_job
 from .integrate import verlet_chunk
-from .selfcollide import (MODE_SPEC, cell_keys, count_slots, place_slots, repel_slots, scatter_slots, query_share,
-                          self_collide, slot_copies)
-from .team import barrier, roll_call, share
+from .selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
+from .team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
 
 #: Pass bits of :func:`run_substeps`: spring forces and Verlet, self-collision, colliders, Provot.
 PASS_INTEGRATE, PASS_SELF, PASS_COLLIDERS, PASS_PROVOT = 1, 2, 4, 8
@@ -58,8 +68,10 @@ def range_bounds(pos: np.ndarray, last: np.ndarray, lo: int, hi: int, box: np.nd
     lo_c = cols[0, :w]
     hi_c = cols[1, :w]
     for c in range(3):
-        lo_c[:] = pos[c, lo : lo + w]
-        hi_c[:] = lo_c
+        first = pos[c, lo : lo + w]
+        for j in range(w):
+            lo_c[j] = first[j]
+            hi_c[j] = first[j]
         for r0 in range(lo, hi, w):
             x = pos[c, r0 : min(r0 + w, hi)]
             xl = last[c, r0 : min(r0 + w, hi)]
@@ -164,166 +176,223 @@ def collide_reachable(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spher
 
 
 @njit(**KERNEL)
-def _member(member: int, size: int, steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarray,
-            free: np.ndarray, pinned: np.ndarray, pins: np.ndarray, blocks: np.ndarray, stream: tuple,
-            rest: np.ndarray, nw: int, h2: float, mass: float, gravity: np.ndarray, keep: float,
-            spheres: np.ndarray, planes: np.ndarray, offset: float, self_mode: int, thickness: float,
-            sim_steps: int, cell: np.ndarray, keys: np.ndarray, slots: np.ndarray, start: np.ndarray,
-            order: np.ndarray, stretch_limit: float, box: np.ndarray, sphere_on: np.ndarray,
-            plane_on: np.ndarray, scratch: tuple, sorting: tuple, sync: np.ndarray, passes: int) -> None:
-    """One member's part of ``steps`` substeps; members meet at a barrier between passes."""
-    offsets, k, spring_rest, buf = stream
-    movable, busy, xs, ys, zs, ks, skips, boxes, cum = scratch
-    spring_jobs = offsets.shape[0] * CHUNKS
-    # a member alone (see team.roll_call) sorts with one row of counts, not the team's
-    counted, tally = sorting
-    hist, cursor = counted[0, :size], counted[1, :size]
-    bands = provot_bands(pos, nw)
-    dist = 2.0 * thickness
+def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
+            col: tuple | None, sync: np.ndarray, passes: int) -> None:
+    """One member's part of ``steps`` substeps; members meet at a barrier between passes.
+
+    Returns early, with the state half-way through a substep, when a barrier reports that the
+    frame was given up (see :func:`clothsim.sim.team.barrier`); the caller then restores it.
+    """
+    pos = st.pos
+    last = st.last
+    spring_jobs = st.offsets.shape[0] * CHUNKS
+    bands = provot_bands(pos, st.nw)
     n = pos.shape[1]
-    table = start.shape[0] - 1
     integrate = passes & PASS_INTEGRATE != 0
-    if passes & PASS_SELF == 0:
-        self_mode = 0
-    have_colliders = spheres.shape[0] + planes.shape[0] > 0
-    colliders = have_colliders and passes & PASS_COLLIDERS != 0
-    # Each member tests the colliders itself (no barrier between the test and its use); member 0
-    # in the caller's arrays, the others in their own.
-    if member != 0:
-        box = np.empty(6)
-        sphere_on = np.empty(spheres.shape[0], dtype=np.bool_)
-        plane_on = np.empty(planes.shape[0], dtype=np.bool_)
-    # The members' boxes are taken right after Verlet, before self-collision, which moves no point
-    # by dist / sim_steps or more (an average of pushes each shorter than dist, over sim_steps):
-    # widened by that, the box still bounds the cloth the colliders see, so skipping stays exact.
-    margin = 0.0 if self_mode == 0 else 1.001 * dist / sim_steps
-    cols = np.empty((2, 64))
-    provot_on = stretch_limit > 0.0 and passes & PASS_PROVOT != 0
-    # the member's own points (its chunks) and its part of the hash table
+    self_on = passes & PASS_SELF != 0
+    colliders = passes & PASS_COLLIDERS != 0
+    provot_on = st.stretch_limit > 0.0 and passes & PASS_PROVOT != 0
+    # the member's own points (its chunks)
     c0, c1 = share(CHUNKS, member, size)
     own0, own1 = share(n, c0, CHUNKS)[0], share(n, c1, CHUNKS)[0]
-    t0, t1 = share(table, member, size)
+    if spec is not None:
+        table = spec.start.shape[0] - 1
+        # a member alone (see team.roll_call) sorts with one row of counts, not the team's
+        hist = spec.counted[0, :size]
+        cursor = spec.counted[1, :size]
+        # the member's part of the hash table
+        t0, t1 = share(table, member, size)
+    if col is not None:
+        # Each member tests the colliders itself (no barrier between the test and its use); member
+        # 0 in the caller's arrays, the others in their own.
+        box = col.box
+        sphere_on = col.sphere_on
+        plane_on = col.plane_on
+        if member != 0:
+            box = np.empty(6)
+            sphere_on = np.empty(col.spheres.shape[0], dtype=np.bool_)
+            plane_on = np.empty(col.planes.shape[0], dtype=np.bool_)
+        # The members' boxes are taken right after Verlet, before self-collision, which moves no
+        # point by dist / sim_steps or more (an average of pushes each shorter than dist, over
+        # sim_steps): widened by that, the box still bounds the cloth the colliders see, so
+        # skipping stays exact.
+        margin = 0.0 if not self_on else col.self_margin
+        cols = np.empty((2, 64))
     gen = 0
     for _ in range(steps):
         if integrate:
             lo, hi = share(spring_jobs, member, size)
             for job in range(lo, hi):
-                spring_job(pos, offsets, k, spring_rest, buf, job)
+                spring_job(pos, st.offsets, st.k, st.spring_rest, st.buf, job)
             gen = barrier(sync, size, gen)
+            if gen < 0:
+                return
             # a point's force is final once gathered, so its Verlet step follows at once
             lo, hi = share(CHUNKS, member, size)
-            if self_mode == MODE_SPEC:
+            if spec is not None:
+                if self_on:
+                    hist[member] = 0
+            for c in range(lo, hi):
+                gather_chunk(st.offsets, st.buf, st.mass, st.gravity, st.forces, c)
+                verlet_chunk(pos, last, st.forces, st.pins, st.h2, st.keep, c)
+                if spec is not None:
+                    if self_on:
+                        # the spec's map is of the positions just integrated: bin them while in cache
+                        p0, p1 = share(n, c, CHUNKS)
+                        cell_keys(pos, spec.cell[0], spec.cell[1], spec.cell[2], spec.keys, spec.slots, table,
+                                  p0, p1)
+                        count_slots(spec.slots, hist[member], p0, p1)
+            if col is not None:
+                member_bounds(pos, last, col.boxes, cols, lo, hi)
+            gen = barrier(sync, size, gen)
+            if gen < 0:
+                return
+        elif spec is not None:
+            if self_on:
+                cell_keys(pos, spec.cell[0], spec.cell[1], spec.cell[2], spec.keys, spec.slots, table, own0, own1)
                 hist[member] = 0
-            for c in range(lo, hi):
-                gather_chunk(offsets, buf, mass, gravity, forces, c)
-                verlet_chunk(pos, last, forces, pins, h2, keep, c)
-                if self_mode == MODE_SPEC:
-                    # the spec's map is of the positions just integrated: bin them while in cache
-                    p0, p1 = share(n, c, CHUNKS)
-                    cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, p0, p1)
-                    count_slots(slots, hist[member], p0, p1)
-            if have_colliders:
-                member_bounds(pos, last, boxes, cols, lo, hi)
-            gen = barrier(sync, size, gen)
-        elif self_mode == MODE_SPEC:
-            cell_keys(pos, cell[0], cell[1], cell[2], keys, slots, table, own0, own1)
-            hist[member] = 0
-            count_slots(slots, hist[member], own0, own1)
-            gen = barrier(sync, size, gen)
-        if self_mode == MODE_SPEC:
-            # A counting sort split over the team: each member places the slots of its part of the
-            # table, then puts its own points in place. A point's owner copies it into its slot
-            # (its position is in the owner's cache): on selfCollision 2.47-2.49 ms a frame (medians
-            # of 15 x 30 frames from frame 60), against 2.68-2.70 when the member repelling a slot
-            # copied it, and 2.50-2.56 with one member sorting alone. Then the busy slots of all
-            # parts are shared out by estimated cost.
-            tally[member, 0], tally[member, 1] = place_slots(hist, cursor, start, busy, cum, t0, t1)
-            gen = barrier(sync, size, gen)
-            scatter_slots(pos, keys, slots, cursor[member], order, xs, ys, zs, ks, own0, own1)
-            gen = barrier(sync, size, gen)
-            for r in range(size):
-                i0, i1 = query_share(cum, tally, table, r, member, size)
-                if i0 < i1:
-                    r0 = share(table, r, size)[0]
-                    repel_slots(pos, movable, dist, sim_steps, start, order, busy, xs, ys, zs, ks, r0 + i0, r0 + i1)
-            gen = barrier(sync, size, gen)
-        elif self_mode != 0:
-            if member == 0:
-                self_collide(pos, free, thickness, sim_steps, self_mode, cell[0], cell[1], cell[2], keys, slots,
-                             start, order)
-            gen = barrier(sync, size, gen)
-        if colliders:
-            lo, hi = share(CHUNKS, member, size)
-            if integrate:
-                merge_bounds(boxes, margin, box)
-            else:
-                # run on its own (profile): bound the positions as they are now
-                member_bounds(pos, last, boxes, cols, lo, hi)
+                count_slots(spec.slots, hist[member], own0, own1)
                 gen = barrier(sync, size, gen)
-                merge_bounds(boxes, 0.0, box)
-            skipped = reachable_colliders(box, spheres, planes, sphere_on, plane_on)
-            if member == 0:
-                skips[0] += skipped
-            for c in range(lo, hi):
-                collide_chunk(pos, last, free, spheres, planes, offset, sphere_on, plane_on, c)
-            gen = barrier(sync, size, gen)
+                if gen < 0:
+                    return
+        if spec is not None:
+            if self_on:
+                # A counting sort split over the team: each member places the slots of its part of
+                # the table, then puts its own points in place. A point's owner copies it into its
+                # slot (its position is in the owner's cache): on selfCollision 2.47-2.49 ms a frame
+                # (medians of 15 x 30 frames from frame 60), against 2.68-2.70 when the member
+                # repelling a slot copied it, and 2.50-2.56 with one member sorting alone. Then the
+                # busy slots of all parts are shared out by estimated cost.
+                spec.tally[member, 0], spec.tally[member, 1] = place_slots(hist, cursor, spec.start, spec.busy,
+                                                                           spec.cum, t0, t1)
+                gen = barrier(sync, size, gen)
+                if gen < 0:
+                    return
+                scatter_slots(pos, spec.keys, spec.slots, cursor[member], spec.order, spec.xs, spec.ys, spec.zs,
+                              spec.ks, own0, own1)
+                gen = barrier(sync, size, gen)
+                if gen < 0:
+                    return
+                for r in range(size):
+                    i0, i1 = query_share(spec.cum, spec.tally, table, r, member, size)
+                    if i0 < i1:
+                        r0 = share(table, r, size)[0]
+                        repel_slots(pos, spec.movable, spec.dist, spec.sim_steps, spec.start, spec.order, spec.busy,
+                                    spec.xs, spec.ys, spec.zs, spec.ks, r0 + i0, r0 + i1)
+                gen = barrier(sync, size, gen)
+                if gen < 0:
+                    return
+        if grid is not None:
+            if self_on:
+                if member == 0:
+                    grid_self_collide(pos, grid.free, grid.thickness, grid.sim_steps, grid.cell[0], grid.cell[1],
+                                      grid.cell[2], grid.keys, grid.slots, grid.start, grid.order)
+                gen = barrier(sync, size, gen)
+                if gen < 0:
+                    return
+        if col is not None:
+            if colliders:
+                lo, hi = share(CHUNKS, member, size)
+                if integrate:
+                    merge_bounds(col.boxes, margin, box)
+                else:
+                    # run on its own (profile): bound the positions as they are now
+                    member_bounds(pos, last, col.boxes, cols, lo, hi)
+                    gen = barrier(sync, size, gen)
+                    if gen < 0:
+                        return
+                    merge_bounds(col.boxes, 0.0, box)
+                skipped = reachable_colliders(box, col.spheres, col.planes, sphere_on, plane_on)
+                if member == 0:
+                    st.skips[0] += skipped
+                for c in range(lo, hi):
+                    collide_chunk(pos, last, col.free, col.spheres, col.planes, col.offset, sphere_on, plane_on, c)
+                gen = barrier(sync, size, gen)
+                if gen < 0:
+                    return
         if provot_on:
             lo, hi = share(bands, member, size)
             for b in range(lo, hi):
-                provot_band(pos, pinned, blocks, rest, nw, stretch_limit, b, bands)
+                provot_band(pos, st.pinned, st.blocks, st.rest, st.nw, st.stretch_limit, b, bands)
             gen = barrier(sync, size, gen)
+            if gen < 0:
+                return
             lo, hi = share(bands - 1, member, size)
             for b in range(lo, hi):
-                provot_cut(pos, pinned, blocks, rest, nw, stretch_limit, b, bands)
+                provot_cut(pos, st.pinned, st.blocks, st.rest, st.nw, st.stretch_limit, b, bands)
             gen = barrier(sync, size, gen)
+            if gen < 0:
+                return
+
+
+@intrinsic
+def _call_member(typingctx, address, member, size, steps, st, spec, grid, col, sync, passes):  # noqa: ANN001, ANN201
+    """Call the compiled :func:`_member` at ``address`` (see :func:`member_address`); returns 1 if
+    it failed (an allocation), else 0.
+
+    A call by address keeps the member's code out of the parallel launcher: Numba links every
+    callee into its caller's module and optimises the whole again, so a direct call had the
+    launcher and its parallel region each re-optimise the entire member (9 s of a 24 s cold
+    compile, for a prange body of two calls).
+    """
+    argtys = (member, size, steps, st, spec, grid, col, sync, passes)
+    sig = types.int64(address, *argtys)
+
+    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
+        conv = context.call_conv
+        fnty = conv.get_function_type(types.void, argtys)
+        fn = builder.inttoptr(args[0], fnty.as_pointer())
+        retty = conv.get_return_type(types.void).pointee
+        ret = cgutils.alloca_once(builder, retty)
+        builder.store(cgutils.get_null_value(retty), ret)
+        excinfo = cgutils.alloca_once(builder, fnty.args[1].pointee)
+        packed = list(conv._get_arg_packer(argtys).as_arguments(builder, args[1:]))
+        code = builder.call(fn, [ret, excinfo, *packed])
+        status = conv._get_return_status(builder, code, builder.load(excinfo))
+        return builder.zext(status.is_error, ir.IntType(64))
+
+    return sig, codegen
+
+
+@lru_cache(maxsize=None)
+def _member_address(argtypes: tuple) -> int:
+    _member.compile(argtypes)
+    cres = _member.overloads[argtypes]
+    return cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
+
+
+def member_address(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None, sync: np.ndarray) -> int:
+    """Address of :func:`_member` compiled for these state groups (compiled, or loaded from the
+    cache, on first use)."""
+    i64 = types.int64
+    return _member_address((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, sync)), i64))
 
 
 @njit(**PARALLEL)
-def run_substeps(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarray, free: np.ndarray,
-                 pinned: np.ndarray, blocks: np.ndarray, stream: tuple, rest: np.ndarray, nw: int,
-                 mass: float, gravity: np.ndarray, dt: float, keep: float, spheres: np.ndarray,
-                 planes: np.ndarray, offset: float, self_mode: int, thickness: float, sim_steps: int,
-                 cell: np.ndarray, keys: np.ndarray, slots: np.ndarray, start: np.ndarray,
-                 order: np.ndarray, stretch_limit: float, box: np.ndarray, sphere_on: np.ndarray,
-                 plane_on: np.ndarray, scratch: tuple, sync: np.ndarray, size: int,
-                 passes: int = PASS_ALL) -> int:
+def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
+                 sync: np.ndarray, size: int, passes: int, member: int) -> int:
     """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
 
-    State arrays are (3, N). Springs come twice: as whole-grid streams for the forces
-    (:func:`clothsim.cloth.spring_streams`) and as block rows for Provot's in-place pass
-    (:func:`clothsim.cloth.spring_blocks`). ``scratch`` is :func:`new_scratch`'s tuple,
-    ``sync`` :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
-    :mod:`clothsim.sim.team`); the result does not depend on it.
+    ``st``, ``spec``, ``grid`` and ``col`` are the named tuples of :mod:`clothsim.sim.state`
+    (the last three ``None`` for a pass the scene does not use). ``sync`` is
+    :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
+    :mod:`clothsim.sim.team`); the result does not depend on it. After the call
+    ``sync[team.ABORT]`` set means the frame was given up half-way (restore and run it alone).
 
-    ``self_mode`` 0 turns self-collision off; ``stretch_limit`` <= 0 turns Provot off.
-    ``passes`` (PASS_* bits) runs only some passes, for :mod:`clothsim.sim.profile`.
+    ``passes`` (PASS_* bits) runs only some passes, for :mod:`clothsim.sim.profile`; ``member``
+    is :func:`member_address` for these groups. ``sync[team.FAILED]`` set after the call means a
+    member failed (it could not allocate its work space).
     """
-    pins = np.flatnonzero(pinned)
-    inv_mass = 1.0 / mass
-    h2 = dt * dt * inv_mass
-    skips = scratch[6]
-    skips[0] = 0
+    st.skips[0] = 0
     sync[:] = 0
-    # the team's counting sort: counts and cursors per member and slot, busy slots and cost per range
-    rows = size if self_mode == MODE_SPEC else 0
-    sorting = (np.zeros((2, rows, start.shape[0] - 1), dtype=np.int32), np.zeros((rows, 2), dtype=np.int64))
-    for member in prange(size):
+    for m in prange(size):
         working = roll_call(sync, size)
-        if working == size:
-            _member(member, size, steps, pos, last, forces, free, pinned, pins, blocks, stream, rest, nw, h2, mass,
-                    gravity, keep, spheres, planes, offset, self_mode, thickness, sim_steps, cell, keys, slots,
-                    start, order, stretch_limit, box, sphere_on, plane_on, scratch, sorting, sync, passes)
-        elif working == 1:
-            _member(0, 1, steps, pos, last, forces, free, pinned, pins, blocks, stream, rest, nw, h2, mass,
-                    gravity, keep, spheres, planes, offset, self_mode, thickness, sim_steps, cell, keys, slots,
-                    start, order, stretch_limit, box, sphere_on, plane_on, scratch, sorting, sync, passes)
-    return skips[0]
-
-
-def new_scratch(n_points: int, table: int, pinned: np.ndarray) -> tuple:
-    """Work arrays of :func:`run_substeps` for a cloth of ``n_points`` and a hash table of
-    ``table`` slots: (movable, busy slots, x, y, z, keys in table order, colliders skipped (one
-    counter), CHUNKS rows of bounding boxes (see :func:`member_bounds`), the busy slots' running
-    cost per table range (see :func:`clothsim.sim.selfcollide.place_slots`))."""
-    return (~pinned, np.zeros(table, dtype=np.int64), *slot_copies(n_points), np.zeros(1, dtype=np.int64),
-            np.zeros((CHUNKS, 6)), np.zeros(table, dtype=np.int64))
+        if working != 0:
+            # one call site, with int64 arguments: one compiled _member whoever runs it
+            me = 0
+            if working == size:
+                me = np.int64(m)
+            if _call_member(member, me, working, steps, st, spec, grid, col, sync, passes) != 0:
+                sync[FAILED] = 1
+                atomic_cas(sync, ABORT, 0, 1)
+    return st.skips[0]

@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 
 
-from .frame import PASS_COLLIDERS, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF, run_substeps
+from .frame import PASS_COLLIDERS, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF
 
 PASSES = ("forces+integrate", "self-collision", "colliders", "provot")
 
@@ -16,7 +16,8 @@ class Profiler:
 
     Each pass is the fast path's own frame kernel told to run that pass alone, one substep at a
     time, in the same order, so the numbers are identical to an unprofiled run; only the timing
-    calls (and a thread team started per pass) are added.
+    calls (and a thread team started per pass) are added. Frames go through the same blow-up
+    guard and team recovery as :meth:`~clothsim.sim.Simulation.step`.
     """
 
     def __init__(self, sim) -> None:  # noqa: ANN001
@@ -53,9 +54,18 @@ class Profiler:
         if not sim.uses_spec_path:
             sim.step()
             return
+        sim._advance_frame(self._run_passes)
+
+    def _run_passes(self, steps: int, saved: tuple | None) -> None:
+        sim = self.sim
+        size = sim.team.size() if saved is not None else 1
+        if not self._passes(steps, size):
+            sim._restore(saved)
+            self._passes(steps, 1)
+
+    def _passes(self, steps: int, size: int) -> bool:
+        sim = self.sim
         t = time.perf_counter
-        steps = sim.scene.simulation.simulation_steps
-        args = sim._substep_args()
         n_colliders = len(sim._spheres) + len(sim._planes)
         for _ in range(steps):
             for name, bit, on in (("forces+integrate", PASS_INTEGRATE, True),
@@ -63,13 +73,16 @@ class Profiler:
                                   ("colliders", PASS_COLLIDERS, n_colliders > 0),
                                   ("provot", PASS_PROVOT, sim._stretch_limit > 0)):
                 if on:
+                    before = sim.colliders_skipped
                     t0 = t()
-                    skips = run_substeps(1, *args, bit)
+                    finished = sim.run_kernel(1, bit, size)
                     self._add(name, t() - t0)
+                    if not finished:
+                        return False
                     if bit == PASS_COLLIDERS:
                         self.collider_tests += n_colliders
-                        self.collider_skips += skips
-        sim.frame += 1
+                        self.collider_skips += sim.colliders_skipped - before
+        return True
 
     def _add(self, name: str, seconds: float) -> None:
         self.seconds[name] += seconds

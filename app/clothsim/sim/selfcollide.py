@@ -150,10 +150,16 @@ def place_slots(hist: np.ndarray, cursor: np.ndarray, start: np.ndarray, busy: n
     # the slots' counts summed over the members in whole-row (vectorised) passes, turned into
     # starts in place, then each member's cursor row: 3.7 us for both halves of selfCollision's
     # table, against 4.8 with the members' counts read slot by slot
+    # (element loops, not slice expressions: those bring in Numba's shape-mismatch error path,
+    # 8 s of a cold compile for this function alone)
     counts = start[t0:t1]
-    counts[:] = hist[0, t0:t1]
+    h = hist[0, t0:t1]
+    for k in range(t1 - t0):
+        counts[k] = h[k]
     for j in range(1, rows):
-        counts += hist[j, t0:t1]
+        h = hist[j, t0:t1]
+        for k in range(t1 - t0):
+            counts[k] += h[k]
     nb = 0
     cost = 0
     for k in range(t0, t1):
@@ -168,11 +174,15 @@ def place_slots(hist: np.ndarray, cursor: np.ndarray, start: np.ndarray, busy: n
             nb += 1
     if t1 == start.shape[0] - 1:
         start[t1] = base
+    first = start[t0:t1]
     for j in range(rows):
         row = cursor[j, t0:t1]
-        row[:] = start[t0:t1]
+        for k in range(t1 - t0):
+            row[k] = first[k]
         for e in range(j):
-            row += hist[e, t0:t1]
+            h = hist[e, t0:t1]
+            for k in range(t1 - t0):
+                row[k] += h[k]
     return nb, cost
 
 
@@ -452,15 +462,25 @@ def self_collide(pos: np.ndarray, free: np.ndarray, thickness: float, steps: int
                  ch: float, ct: float, keys: np.ndarray, slots: np.ndarray, start: np.ndarray,
                  order: np.ndarray) -> None:
     """Build the map from the current positions, then repel close pairs (see module doc)."""
+    if mode != MODE_SPEC:
+        grid_self_collide(pos, free, thickness, steps, cw, ch, ct, keys, slots, start, order)
+        return
     busy = np.empty(start.shape[0] - 1, dtype=np.int64)
     nb = build_map(pos, cw, ch, ct, keys, slots, start, order, busy)
+    movable = np.zeros(pos.shape[1], dtype=np.bool_)
+    for k in range(free.shape[0]):
+        movable[free[k]] = True
+    _collide_cells(pos, movable, 2.0 * thickness, steps, keys, start, order, busy, nb)
+
+
+@njit(**KERNEL)
+def grid_self_collide(pos: np.ndarray, free: np.ndarray, thickness: float, steps: int, cw: float, ch: float,
+                      ct: float, keys: np.ndarray, slots: np.ndarray, start: np.ndarray, order: np.ndarray) -> None:
+    """The ``grid`` mode: build the map of cubic cells, then repel each free point, in index
+    order, from every point of the 27 cells around its own closer than 2 * thickness."""
+    busy = np.empty(start.shape[0] - 1, dtype=np.int64)
+    build_map(pos, cw, ch, ct, keys, slots, start, order, busy)
     dist = 2.0 * thickness
-    if mode == MODE_SPEC:
-        movable = np.zeros(pos.shape[1], dtype=np.bool_)
-        for k in range(free.shape[0]):
-            movable[free[k]] = True
-        _collide_cells(pos, movable, dist, steps, keys, start, order, busy, nb)
-        return
     shift = _slot_shift(start.shape[0] - 1)
     acc = np.zeros(3)
     for k in range(free.shape[0]):

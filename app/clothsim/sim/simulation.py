@@ -10,8 +10,10 @@ from ..errors import SimulationBlowUp
 from ..scene import Scene
 from . import team
 from .collide import SURFACE_OFFSET
-from .frame import new_scratch, run_substeps
-from .selfcollide import MODE_GRID, MODE_SPEC, spec_table_size, table_size
+from .frame import PASS_ALL, member_address, run_substeps
+from .jit import CHUNKS
+from .selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
+from .state import ClothState, Colliders, GridHash, SpecHash
 
 _SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID}
 #: Rest length given to cut springs: no cloth stretches that far, and its square stays finite.
@@ -52,10 +54,16 @@ class Simulation:
         self._slots = np.zeros(n, dtype=np.int64)
         self._start = np.zeros(m + 1, dtype=np.int64)
         self._order = np.zeros(n, dtype=np.int64)
-        self._scratch = new_scratch(n, m, self.pinned)
+        # the team's counting sort: busy slots, running cost, points copied in table order, and
+        # counts and cursors per member and slot (at most CHUNKS members, see team.team_size)
+        self._sort = (np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64), *slot_copies(n),
+                      np.zeros((2, CHUNKS, m), dtype=np.int32), np.zeros((CHUNKS, 2), dtype=np.int64))
+        self._boxes = np.zeros((CHUNKS, 6))
+        self._skips = np.zeros(1, dtype=np.int64)
+        self._pins = np.flatnonzero(self.pinned)
         self._sync = team.new_sync()
-        #: Threads that share a frame; 1 once a frame found they could not run side by side.
-        self._team_size = team.team_size()
+        #: Members of the next frames' thread team (recovers after a failed roll call).
+        self.team = team.TeamPlan()
         self.frame = 0
         self.colliders_skipped = 0
         # Extra per-run state of the non-spec integrators (e.g. velocities); None = start afresh.
@@ -169,6 +177,31 @@ class Simulation:
             h = 3.0 * cloth.height / cloth.num_height_points
             self._cell = np.array([w, h, max(w, h)])
         self._stretch_limit = -1.0 if sim.max_stretch is None else 1.0 + sim.max_stretch
+        self._kernel_args = self._pack()
+
+    def _pack(self) -> tuple:
+        """The frame kernel's state groups (:mod:`clothsim.sim.state`), ``None`` for a pass the
+        scene does not use."""
+        cloth, sim = self.scene.cloth, self.scene.simulation
+        offsets, k, spring_rest, buf = self._stream
+        dt = self.dt
+        st = ClothState(self._pos, self._last, self._forces, self.pinned, self._pins, self._blocks, self._rest,
+                        self.nw, offsets, k, spring_rest, buf, self.mass, self._gravity, dt * dt * (1.0 / self.mass),
+                        self._keep, self._stretch_limit, self._skips)
+        steps = sim.simulation_steps
+        spec = grid = col = None
+        if self._self_mode == MODE_SPEC:
+            busy, cum, xs, ys, zs, ks, counted, tally = self._sort
+            spec = SpecHash(self._cell, self._keys, self._slots, self._table, self._order, ~self.pinned, busy, xs, ys,
+                            zs, ks, cum, counted, tally, 2.0 * cloth.thickness, steps)
+        elif self._self_mode == MODE_GRID:
+            grid = GridHash(self.free, cloth.thickness, steps, self._cell, self._keys, self._slots, self._table,
+                            self._order)
+        if len(self._spheres) + len(self._planes) > 0:
+            margin = 0.0 if self._self_mode == 0 else 1.001 * (2.0 * cloth.thickness) / steps
+            col = Colliders(self.free, self._spheres, self._planes, SURFACE_OFFSET, self._box, self._sphere_on,
+                            self._plane_on, self._boxes, margin)
+        return st, spec, grid, col
 
     # ------------------------------------------------------------------------------------------
     # Stepping
@@ -190,39 +223,51 @@ class Simulation:
         for _ in range(int(frames)):
             self._advance_frame()
 
-    def _substep_args(self) -> tuple:
-        return (self._pos, self._last, self._forces, self.free, self.pinned, self._blocks, self._stream,
-                self._rest, self.nw, self.mass, self._gravity, self.dt, self._keep,
-                self._spheres, self._planes, SURFACE_OFFSET, self._self_mode, self.scene.cloth.thickness,
-                self.scene.simulation.simulation_steps, self._cell, self._keys, self._slots, self._table,
-                self._order, self._stretch_limit, self._box, self._sphere_on, self._plane_on, self._scratch,
-                self._sync, min(self._team_size, team.team_size()))
-
     @property
     def uses_spec_path(self) -> bool:
         """True when the scene runs the spec's Verlet with per-substep damping (the fast path)."""
         sim = self.scene.simulation
         return sim.integrator == "verlet" and sim.damping_mode == "spec"
 
-    def _run(self, steps: int) -> None:
-        if self.uses_spec_path:
-            self.colliders_skipped += run_substeps(steps, *self._substep_args())
-            if self._sync[team.MODE] == team.ALONE:
-                self._team_size = 1
-        else:
+    def run_kernel(self, steps: int, passes: int = PASS_ALL, size: int = 1) -> bool:
+        """Run ``steps`` substeps of the frame kernel (only the ``passes`` bits) with a team of
+        ``size``; False when the team gave the frame up half-way (the state must be restored)."""
+        address = member_address(*self._kernel_args, self._sync)
+        self.colliders_skipped += run_substeps(steps, *self._kernel_args, self._sync, size, passes, address)
+        if self._sync[team.FAILED]:
+            raise MemoryError("the frame kernel could not allocate its work space")
+        self.team.after(self._sync, size)
+        return self._sync[team.ABORT] == 0
+
+    def _run(self, steps: int, saved: tuple | None = None) -> None:
+        """Advance ``steps`` substeps. With ``saved`` (the state before them), the fast path may use
+        the thread team and, if the team gives up half-way, restores ``saved`` and runs alone."""
+        if not self.uses_spec_path:
             from .integrators import advance
 
             advance(self, steps)
+            return
+        size = self.team.size() if saved is not None else 1
+        if not self.run_kernel(steps, PASS_ALL, size):
+            self._restore(saved)
+            self.run_kernel(steps, PASS_ALL, 1)
 
-    def _advance_frame(self) -> None:
+    def _restore(self, saved: tuple) -> None:
+        self._pos[...] = saved[0]
+        self._last[...] = saved[1]
+        self.integrator_state = None if saved[2] is None else saved[2].copy()
+
+    def _advance_frame(self, run=None) -> None:  # noqa: ANN001
+        """One frame through ``run(steps, saved)`` (default :meth:`_run`), under the blow-up guard."""
         # Once per frame: a non-finite position or an exploding kinetic energy stops the run
         # (cheap: one pass over the free points). The state is restored before raising.
         from .guard import sim_blow_up_reason
 
+        run = run or self._run
         state = self.integrator_state
         saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy())
         steps = self.scene.simulation.simulation_steps
-        self._run(steps)
+        run(steps, saved)
         if sim_blow_up_reason(self) is not None:
             self._report_blow_up(saved, steps)
         self.frame += 1
@@ -231,12 +276,7 @@ class Simulation:
         # Replay the frame one substep at a time (the run is deterministic) to name the substep.
         from .guard import blow_up_advice, sim_blow_up_reason
 
-        def restore() -> None:
-            self._pos[...] = saved[0]
-            self._last[...] = saved[1]
-            self.integrator_state = None if saved[2] is None else saved[2].copy()
-
-        restore()
+        self._restore(saved)
         bad, what = steps, "positions became non-finite"
         for sub in range(1, steps + 1):
             self._run(1)
@@ -244,7 +284,7 @@ class Simulation:
             if reason is not None:
                 bad, what = sub, reason
                 break
-        restore()
+        self._restore(saved)
         sim = self.scene.simulation
         raise SimulationBlowUp(
             f"simulation blew up at frame {self.frame + 1}, substep {bad}: {what} "

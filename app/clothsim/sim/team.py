@@ -9,10 +9,16 @@ A barrier only works if every member runs at the same time on its own thread. Op
 usual threading layer) gives each of ``prange(n)``'s n iterations its own thread, but a layer
 may also run iterations one after another (TBB can), where the first member would wait forever.
 So members first answer a roll call: once all have arrived, they are known to run side by side
-and work as a team; if they have not all arrived after a while (10.4-10.6 ms measured here), the
-first member to give up runs the frame alone, the others find it taken and leave, and the caller
-uses one member from then on. Waits spin, then yield the core, so a machine with more threads than cores (many runs
-side by side) is slowed, not stalled.
+and work as a team; if they have not all arrived within :data:`ROLL_CALL_NS` (10 ms, read from
+the monotonic clock), the first member to give up runs the frame alone and the others find it
+taken and leave. The caller then runs alone for a while and tries the team again later (see
+:class:`TeamPlan`), so one slow roll call on a busy machine does not cost the threads for good.
+
+Every wait is bounded in time: a member that has waited :data:`BARRIER_NS` (2 s) at a barrier
+for a member that never comes (one that failed, or a thread the system stopped) raises the
+``ABORT`` flag, and every member leaves at its next barrier. The caller restores the state the
+frame started from and runs it again alone. Waits spin, then yield the core, so a machine with
+more threads than cores (many runs side by side) is slowed, not stalled.
 
 Results never depend on the team size: every pass is cut into the same work items (see
 :data:`clothsim.sim.jit.CHUNKS`) whoever runs them.
@@ -20,7 +26,9 @@ Results never depend on the team size: every pass is cut into the same work item
 
 from __future__ import annotations
 
+import os
 import platform
+import time
 
 import numba
 import numpy as np
@@ -36,14 +44,23 @@ ARRIVED = 0   # members at the current barrier
 GENERATION = 8  # barriers completed
 ROLL = 16      # members that answered the roll call
 MODE = 24      # 0 gathering, 1 team, 2 one member alone
-SYNC_SIZE = 32
+ABORT = 32     # set when a member gave up waiting at a barrier: everyone leaves
+FAILED = 40    # set when a member failed (could not allocate its work space)
+SYNC_SIZE = 48
 
 _GATHERING, _TEAM = 0, 1
 #: ``sync[MODE]`` after a frame whose members could not run side by side.
 ALONE = 2
-# Spins before a waiting member starts yielding its core, and yields before a roll call gives up.
+# Spins before a waiting member starts yielding its core (and reading the clock).
 _SPINS = 200
-_ROLL_YIELDS = 20000
+#: How long the first member waits at the roll call for the others before running alone.
+ROLL_CALL_NS = 10_000_000
+#: How long a member waits at a barrier before it gives the frame up (a member is missing).
+BARRIER_NS = 2_000_000_000
+#: Frames run alone after a failed roll call before the team is tried again; doubles with each
+#: failure in a row, up to :data:`MAX_BACKOFF`.
+FIRST_BACKOFF = 8
+MAX_BACKOFF = 1024
 
 
 def new_sync() -> np.ndarray:
@@ -51,9 +68,57 @@ def new_sync() -> np.ndarray:
     return np.zeros(SYNC_SIZE, dtype=np.int64)
 
 
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity, else the machine's count)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
 def team_size() -> int:
-    """Members for the next frame: Numba's thread count (``NUMBA_NUM_THREADS``)."""
-    return int(numba.get_num_threads())
+    """Members for the next frame: Numba's thread count (``NUMBA_NUM_THREADS``), capped at the
+    useful size. A pass has :data:`~clothsim.sim.jit.CHUNKS` work items, so more members than
+    that only wait at every barrier; more members than cores take turns on a core while the
+    rest spin."""
+    from .jit import CHUNKS
+
+    return max(1, min(int(numba.get_num_threads()), CHUNKS, available_cores()))
+
+
+class TeamPlan:
+    """How many members the next frame gets, recovering from failed roll calls.
+
+    A roll call fails when the members could not all start within 10 ms (a loaded machine, or a
+    threading layer that runs them one after another). The frame then ran alone, correctly; the
+    next :data:`FIRST_BACKOFF` frames run alone too, then the team is tried again. Each failure
+    in a row doubles the wait (up to :data:`MAX_BACKOFF` frames); a frame the team ran resets it.
+    """
+
+    def __init__(self) -> None:
+        self.backoff = 0
+        self.alone_for = 0
+        self.failed_roll_calls = 0
+        self.aborted_frames = 0
+
+    def size(self) -> int:
+        """Members for the next kernel call."""
+        if self.alone_for > 0:
+            self.alone_for -= 1
+            return 1
+        return team_size()
+
+    def after(self, sync: np.ndarray, size: int) -> None:
+        """Record how a kernel call with ``size`` members went."""
+        if size <= 1:
+            return
+        if sync[MODE] == ALONE or sync[ABORT] != 0:
+            self.failed_roll_calls += sync[MODE] == ALONE
+            self.aborted_frames += sync[ABORT] != 0
+            self.backoff = min(MAX_BACKOFF, FIRST_BACKOFF if self.backoff == 0 else 2 * self.backoff)
+            self.alone_for = self.backoff
+        else:
+            self.backoff = 0
 
 
 def _element_pointer(context, builder, arr_type, arr, idx):  # noqa: ANN001, ANN202
@@ -110,6 +175,29 @@ def yield_core(typingctx):  # noqa: ANN001, ANN201
     return sig, codegen
 
 
+_CLOCK = getattr(time, "CLOCK_MONOTONIC", 1)
+
+
+@intrinsic
+def monotonic_ns(typingctx):  # noqa: ANN001, ANN201
+    """clock_gettime(CLOCK_MONOTONIC) in nanoseconds (a vDSO call: no system call, ~20 ns)."""
+    sig = types.int64()
+
+    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
+        i64 = ir.IntType(64)
+        timespec = ir.LiteralStructType([i64, i64])
+        fn = cgutils.get_or_insert_function(
+            builder.module, ir.FunctionType(ir.IntType(32), [ir.IntType(32), timespec.as_pointer()]),
+            "clock_gettime")
+        ts = cgutils.alloca_once(builder, timespec)
+        builder.call(fn, [ir.Constant(ir.IntType(32), _CLOCK), ts])
+        sec = builder.load(cgutils.gep_inbounds(builder, ts, 0, 0))
+        nsec = builder.load(cgutils.gep_inbounds(builder, ts, 0, 1))
+        return builder.add(builder.mul(sec, ir.Constant(i64, 1_000_000_000)), nsec)
+
+    return sig, codegen
+
+
 _X86 = platform.machine().lower() in ("x86_64", "amd64", "i686", "i386")
 
 
@@ -134,13 +222,14 @@ def roll_call(sync: np.ndarray, size: int) -> int:
     """Called once by every member; returns the team size to work with, or 0: leave at once.
 
     Returns ``size`` when all members arrived (they run concurrently), 1 to the single member
-    that runs the frame alone when they did not, 0 to the rest.
+    that runs the frame alone when they did not arrive within :data:`ROLL_CALL_NS`, 0 to the rest.
     """
     if size == 1:
         return 1
     if atomic_add(sync, ROLL, 1) == size - 1:
         atomic_cas(sync, MODE, _GATHERING, _TEAM)
     waited = 0
+    began = 0
     while True:
         mode = atomic_load(sync, MODE)
         if mode == _TEAM:
@@ -151,30 +240,46 @@ def roll_call(sync: np.ndarray, size: int) -> int:
         spin_pause()
         if waited > _SPINS:
             yield_core()
-            if waited > _SPINS + _ROLL_YIELDS and atomic_cas(sync, MODE, _GATHERING, ALONE) == _GATHERING:
+            now = monotonic_ns()
+            if began == 0:
+                began = now
+            elif now - began > ROLL_CALL_NS and atomic_cas(sync, MODE, _GATHERING, ALONE) == _GATHERING:
                 return 1
 
 
 @njit(**EXACT)
 def barrier(sync: np.ndarray, size: int, generation: int) -> int:
-    """Wait until all ``size`` members have arrived; returns the next generation number.
+    """Wait until all ``size`` members have arrived; returns the next generation number, or -1
+    when the frame was given up (``sync[ABORT]``): the member must then leave at once.
 
     Every member passes its own count of barriers met; the last to arrive resets the arrival
     count and then advances the shared generation, which releases the others (and publishes
-    everything written before the barrier to them).
+    everything written before the barrier to them). A member that waits longer than
+    :data:`BARRIER_NS` sets ``sync[ABORT]``, which releases everyone.
     """
     if size == 1:
         return generation + 1
+    if atomic_load(sync, ABORT) != 0:
+        return -1
     if atomic_add(sync, ARRIVED, 1) == size - 1:
         sync[ARRIVED] = 0
         atomic_add(sync, GENERATION, 1)
-    else:
-        waited = 0
-        while atomic_load(sync, GENERATION) == generation:
-            spin_pause()
-            waited += 1
-            if waited > _SPINS:
-                yield_core()
+        return generation + 1
+    waited = 0
+    began = 0
+    while atomic_load(sync, GENERATION) == generation:
+        spin_pause()
+        waited += 1
+        if waited > _SPINS:
+            yield_core()
+            if atomic_load(sync, ABORT) != 0:
+                return -1
+            now = monotonic_ns()
+            if began == 0:
+                began = now
+            elif now - began > BARRIER_NS:
+                atomic_cas(sync, ABORT, 0, 1)
+                return -1
     return generation + 1
 
 

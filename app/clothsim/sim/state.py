@@ -1,0 +1,87 @@
+"""What the frame kernel (:func:`clothsim.sim.frame.run_substeps`) is given: named tuples of flat
+arrays and constants, one for the cloth and one per optional pass.
+
+A pass the scene does not use is passed as ``None``; Numba compiles the kernel separately for
+each combination of groups present and prunes the code of the absent ones before typing, so a
+scene pays compile time only for its own passes (and the on-disk cache holds one kernel per
+combination used). A new feature adds a field to a group, or a new group, instead of growing
+every signature by its arrays.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class ClothState(NamedTuple):
+    """The cloth: (3, N) state, the springs (streams for the forces, blocks for Provot) and the
+    per-substep constants."""
+
+    pos: np.ndarray
+    last: np.ndarray
+    forces: np.ndarray
+    pinned: np.ndarray
+    pins: np.ndarray
+    blocks: np.ndarray
+    rest: np.ndarray
+    nw: int
+    offsets: np.ndarray
+    k: np.ndarray
+    spring_rest: np.ndarray
+    buf: np.ndarray
+    mass: float
+    gravity: np.ndarray
+    h2: float
+    keep: float
+    stretch_limit: float
+    skips: np.ndarray
+
+
+class SpecHash(NamedTuple):
+    """The spec's same-cell self-collision, its counting sort split over the team."""
+
+    cell: np.ndarray
+    keys: np.ndarray
+    slots: np.ndarray
+    start: np.ndarray
+    order: np.ndarray
+    movable: np.ndarray
+    busy: np.ndarray
+    xs: np.ndarray
+    ys: np.ndarray
+    zs: np.ndarray
+    ks: np.ndarray
+    cum: np.ndarray
+    counted: np.ndarray
+    tally: np.ndarray
+    dist: float
+    sim_steps: int
+
+
+class GridHash(NamedTuple):
+    """The 27-cell grid self-collision (run by one member)."""
+
+    free: np.ndarray
+    thickness: float
+    sim_steps: int
+    cell: np.ndarray
+    keys: np.ndarray
+    slots: np.ndarray
+    start: np.ndarray
+    order: np.ndarray
+
+
+class Colliders(NamedTuple):
+    """Spheres and planes, with the bounding boxes of the skip test."""
+
+    free: np.ndarray
+    spheres: np.ndarray
+    planes: np.ndarray
+    offset: float
+    box: np.ndarray
+    sphere_on: np.ndarray
+    plane_on: np.ndarray
+    boxes: np.ndarray
+    self_margin: float
