@@ -18,6 +18,7 @@ examples:
   clothsim simulate scenes/sphere.json --frames 180 --out sphere.npz
   clothsim render sphere --shader phong -o sphere.png
   clothsim bench speed
+  clothsim compile                 # compile every kernel now (images, CI caches, cluster workers)
 """
 
 
@@ -44,13 +45,16 @@ def build_parser() -> argparse.ArgumentParser:
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
     bench.set_defaults(func=lambda args: (bench.print_help(), 2)[1])
 
+    from . import compiling
     from .bench import accuracy, scaling, speed, stability
+    from .bench import compile as bench_compile
     from .render.commands import add_parsers as add_render_parsers
 
     speed.add_parser(bench_sub)
     add_render_parsers(sub, bench_sub)
-    for module in (accuracy, stability, scaling):
+    for module in (accuracy, stability, scaling, bench_compile):
         module.add_parser(bench_sub)
+    compiling.add_parser(sub)
     return parser
 
 
@@ -62,6 +66,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from .compiling import install_notice
+
+    install_notice()
     try:
         return int(args.func(args) or 0)
     except ClothsimError as exc:

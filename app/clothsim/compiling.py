@@ -1,0 +1,242 @@
+"""The Numba kernels' compile on first use: a notice while it happens, a record of what was compiled
+and for how long, and :func:`compile_all` (``clothsim compile``) to do it ahead of time.
+
+Kernels are compiled for this CPU the first time a scene needs them and cached on disk (next to
+the installed package, or in Numba's user-wide cache when that folder is read-only). A warm
+cache compiles nothing, and then nothing here prints anything.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, TextIO
+
+from numba.core import event
+
+#: Cold compile of the frame kernel as a user first meets it (``clothsim simulate pinned2``, every
+#: cache empty, measured with ``clothsim bench compile`` on a 2-core machine).
+FIRST_RUN_SECONDS = 15
+
+
+@dataclass(frozen=True)
+class Compiled:
+    """One compile: the kernel, the groups or types it was compiled for, and its seconds
+    (``own``: not counting the kernels it called that were compiled inside it)."""
+
+    kernel: str
+    variant: str
+    seconds: float
+    own: float
+    depth: int
+
+
+def _kernel_name(data: dict[str, Any]) -> tuple[str, str]:
+    disp = data.get("dispatcher")
+    func = getattr(disp, "py_func", None)
+    name = f"{func.__module__}.{func.__qualname__}" if func is not None else str(disp)
+    args = data.get("args") or ()
+    # the frame kernel's state groups by name ("-" for a pass the scene does not use)
+    groups = [getattr(getattr(a, "instance_class", None), "__name__", None) or ("-" if str(a) == "none" else None)
+              for a in args]
+    variant = ", ".join(g for g in groups if g) if any(g and g != "-" for g in groups) else ""
+    return name, variant
+
+
+class CompileRecorder(event.Listener):
+    """Collects every Numba compile of this process as :class:`Compiled` records."""
+
+    def __init__(self) -> None:
+        self.records: list[Compiled] = []
+        self._stack: list[list[float]] = []
+
+    def on_start(self, ev: event.Event) -> None:
+        self._stack.append([time.perf_counter(), 0.0])
+
+    def on_end(self, ev: event.Event) -> None:
+        began, inner = self._stack.pop()
+        seconds = time.perf_counter() - began
+        if self._stack:
+            self._stack[-1][1] += seconds
+        name, variant = _kernel_name(ev.data)
+        self.records.append(Compiled(name, variant, seconds, seconds - inner, len(self._stack)))
+
+    def total(self) -> float:
+        """Seconds spent compiling (outermost compiles only)."""
+        return sum(r.seconds for r in self.records if r.depth == 0)
+
+
+class CompileNotice(event.Listener):
+    """Says on ``stream`` that kernels are being compiled, once, when the first compile starts;
+    on a terminal it also shows which kernel and the seconds so far while a compile runs."""
+
+    def __init__(self, stream: TextIO = sys.stderr, estimate: float = FIRST_RUN_SECONDS) -> None:
+        self.stream = stream
+        self.estimate = estimate
+        self.announced = False
+        self.depth = 0
+        self.kernel = ""
+        self._bar: Any = None
+        self._began = 0.0
+        self._lock = threading.Lock()
+
+    def on_start(self, ev: event.Event) -> None:
+        with self._lock:
+            self.depth += 1
+            if self.depth > 1:
+                return
+            self.kernel = _kernel_name(ev.data)[0].rsplit(".", 1)[-1].lstrip("_")
+            if not self.announced:
+                self.announced = True
+                self._began = time.perf_counter()
+                print(f"clothsim: compiling kernels for this CPU (first run only, about {self.estimate:.0f} s)...",
+                      file=self.stream, flush=True)
+                if self.stream.isatty():
+                    threading.Thread(target=self._tick, name="clothsim-compile-progress", daemon=True).start()
+            if self.stream.isatty() and self._bar is None:
+                # made here, not in the thread: tqdm's first lock taken in a second thread while
+                # this one is compiling (and importing) can hang that thread
+                from tqdm import tqdm
+
+                self._bar = tqdm(total=round(self.estimate), desc=f"compiling {self.kernel}", unit="s",
+                                 file=self.stream, leave=False, bar_format="{desc}: {bar} {n:.0f}/{total:.0f} s")
+
+    def on_end(self, ev: event.Event) -> None:
+        with self._lock:
+            self.depth -= 1
+            if self.depth == 0 and self._bar is not None:
+                # cleared before the command prints anything of its own
+                self._bar.close()
+                self._bar = None
+
+    def _tick(self) -> None:
+        while True:
+            time.sleep(0.25)
+            with self._lock:
+                if self._bar is not None:
+                    self._bar.n = min(time.perf_counter() - self._began, self._bar.total)
+                    self._bar.set_description_str(f"compiling {self.kernel}", refresh=False)
+                    self._bar.refresh()
+
+
+def install_notice(stream: TextIO = sys.stderr) -> CompileNotice:
+    """Register a :class:`CompileNotice` for the rest of this process."""
+    notice = CompileNotice(stream)
+    event.register("numba:compile", notice)
+    return notice
+
+
+# ---------------------------------------------------------------------------------------------
+# Ahead of time
+
+
+def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet", damping_mode: str = "spec"):
+    from .scene import scene_from_dict
+
+    data: dict[str, Any] = {
+        "cloth": {"width": 1, "height": 1, "num_width_points": 6, "num_height_points": 6, "thickness": 0.01,
+                  "orientation": 0, "pinned": [[0, 0]], "damping": 0.2, "density": 150, "ks": 5000},
+        "simulation": {"self_collision": {"spec": True, "grid": "grid", "off": False}[self_collision],
+                       "integrator": integrator, "damping_mode": damping_mode, "simulation_steps": 2},
+    }
+    if colliders:
+        data["sphere"] = {"origin": [0.5, 0.5, 0.5], "radius": 0.2, "friction": 0.3}
+        data["plane"] = {"point": [0, 0, 0], "normal": [0, 1, 0], "friction": 0.5}
+    return scene_from_dict(data, "<compile>")
+
+
+def work_items() -> list[tuple[str, Callable[[], None]]]:
+    """Everything ``clothsim compile`` compiles: each frame-kernel plan (self-collision mode x
+    colliders), each other integrator, the rest detector and the renderer's mesh kernel."""
+    import numpy as np
+
+    from .sim import Simulation
+
+    def step(scene) -> Callable[[], None]:  # noqa: ANN001
+        return lambda: Simulation(scene).step(1)
+
+    items = [(f"frame kernel: self-collision {mode}, {'colliders' if col else 'no colliders'}",
+              step(_tiny_scene(mode, col))) for mode in ("spec", "off", "grid") for col in (False, True)]
+    items += [(f"integrator {name}", step(_tiny_scene("spec", True, name)))
+              for name in ("symplectic_euler", "implicit_euler", "xpbd")]
+    items.append(("verlet, rate damping", step(_tiny_scene("spec", True, "verlet", "rate"))))
+
+    def rest() -> None:
+        from .sim.rest import max_displacement
+
+        a = np.zeros((3, 4))
+        max_displacement(a, a)
+
+    def mesh() -> None:
+        from .render import mesh as cloth_mesh
+
+        out = np.zeros((4, cloth_mesh.CLOTH_FLOATS), dtype=np.float32)
+        cloth_mesh.update_cloth_vertices(np.zeros((4, 3)), 2, 2, True, out)
+
+    items += [("rest detector", rest), ("render: cloth mesh", mesh)]
+    return items
+
+
+def compile_all() -> list[Compiled]:
+    """Compile (or load from the cache) every kernel of :func:`work_items`; returns every compile
+    made."""
+    return [c for _, _, compiled in each_item() for c in compiled]
+
+
+def record_command(log_path: str, argv: Sequence[str]) -> int:
+    """Run the CLI with ``argv`` and write what it compiled to ``log_path`` as JSON (used by
+    ``clothsim bench compile`` in a fresh process)."""
+    from .cli import main
+
+    recorder = CompileRecorder()
+    event.register("numba:compile", recorder)
+    began = time.perf_counter()
+    code = main(list(argv))
+    wall = time.perf_counter() - began
+    with open(log_path, "w", encoding="utf-8") as fh:
+        json.dump({"code": code, "seconds": wall, "compiled": [r.__dict__ for r in recorder.records]}, fh)
+    return code
+
+
+def add_parser(sub: Any) -> None:
+    """Register ``clothsim compile``."""
+    p = sub.add_parser(
+        "compile", help="compile every kernel ahead of time (container images, CI caches, cluster workers)",
+        description="Compile every Numba kernel for this CPU now (each frame-kernel plan, the other "
+                    "integrators, the renderer's mesh kernel) and cache them, so that no later command waits "
+                    "for a compile. Prints what it compiled and how long it took; with a warm cache it only "
+                    "loads them.")
+    p.set_defaults(func=run_compile)
+
+
+def run_compile(args: Any) -> int:
+    """Body of ``clothsim compile``."""
+    total = 0.0
+    count = 0
+    print(f"{'work item':<46}{'seconds':>9}  compiled")
+    for label, seconds, compiled in each_item():
+        total += seconds
+        mine = [c for c in compiled if c.depth == 0]
+        count += len(compiled)
+        names = ", ".join(sorted({c.kernel.rsplit('.', 1)[-1] for c in mine})) or "(cached)"
+        print(f"{label:<46}{seconds:>9.1f}  {names}", flush=True)
+    print(f"{'total':<46}{total:>9.1f}  {count} compiles")
+    return 0
+
+
+def each_item():  # noqa: ANN201
+    """Run :func:`work_items` one by one, yielding (label, seconds, compiles made) after each."""
+    recorder = CompileRecorder()
+    event.register("numba:compile", recorder)
+    try:
+        for label, work in work_items():
+            before = len(recorder.records)
+            began = time.perf_counter()
+            work()
+            yield label, time.perf_counter() - began, recorder.records[before:]
+    finally:
+        event.unregister("numba:compile", recorder)
