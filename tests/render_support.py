@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -15,16 +16,27 @@ GOLDEN_DIR = Path(__file__).parent / "golden"
 GOLDEN_SIZE = 256
 UPDATE_ENV = "CLOTHSIM_UPDATE_GOLDENS"
 
-# Tolerances, in 8-bit steps. The same GL program on another driver or CPU (llvmpipe builds
-# with other SIMD widths, a hardware GPU) rasterises edges and filters textures slightly
-# differently: those differences are small on average and confined to the few pixels along
-# silhouettes and texel boundaries. A real change (a wrong normal, a missing term, a moved
-# camera) shifts a large area by far more. So: the mean must stay within one step, and all but
-# the worst 0.5% of pixel-channels (about 330 values at 256x256, roughly an edge's length) within
-# 8 steps.
+# Tolerances, in 8-bit steps. The same GL program on another driver or CPU rasterises edges and
+# filters textures slightly differently: those differences are small on average and confined to
+# the pixels along silhouettes and texel boundaries. A real change (a wrong normal, a missing
+# term, a moved camera) shifts a large area by far more. So: the mean must stay within one step,
+# all but the worst 0.5% of pixel-channels (about 330 values at 256x256, roughly an edge's length)
+# within 8 steps, and no more than 10% of them may be off by 3 steps or more.
+#
+# The last rule is the one that sees a small shift of a whole region: +3 on every cloth pixel
+# (41-46% of the image) moves the mean by only 1.2-1.4, and on the wireframe, whose white lines
+# cannot get brighter, by 0.58, under the first rule's limit; it puts 19% (wireframe) to 46% of
+# the pixel-channels 3 steps off. Measured against it (tests/test_render_golden.py): the same
+# renders with anti-aliasing off differ by 3+ steps in at most 2.5% of the pixel-channels of the
+# shaded looks, Mesa's softpipe (another rasteriser, other texture filtering) in at most 7.6%,
+# and a 1/64-pixel shift of the whole image in at most 2.1%. The wireframe is the exception to
+# "noise stays near edges": at 256x256 its 48x48 lines leave almost no pixel far from an edge, so
+# a 1/256-pixel shift already takes its p99.5 to 19.
 MEAN_TOLERANCE = 1.0
 PERCENTILE = 99.5
 PERCENTILE_TOLERANCE = 8.0
+SHIFT_STEPS = 3
+SHIFT_SHARE = 0.10
 
 
 @dataclass
@@ -70,18 +82,29 @@ def draped_state() -> FixedState:
                       pinned=pinned_mask(scene.cloth))
 
 
-def image_difference(actual: np.ndarray, expected: np.ndarray) -> tuple[float, float]:
-    """(mean absolute difference, 99.5th percentile) over every pixel channel, in 8-bit steps."""
+class Difference(NamedTuple):
+    """How far two images are apart, over every pixel channel, in 8-bit steps."""
+
+    mean: float  # mean absolute difference
+    pct: float  # its 99.5th percentile
+    shifted: float  # share of pixel-channels off by SHIFT_STEPS or more
+
+    def __str__(self) -> str:
+        return f"mean {self.mean:.2f}, p99.5 {self.pct:.1f}, {self.shifted:.1%} off by {SHIFT_STEPS}+"
+
+
+def image_difference(actual: np.ndarray, expected: np.ndarray) -> Difference:
+    """The three figures the tolerances above bound."""
     if actual.shape != expected.shape:
-        return float("inf"), float("inf")
+        return Difference(float("inf"), float("inf"), 1.0)
     d = np.abs(actual.astype(np.int16) - expected.astype(np.int16)).astype(np.float64)
-    return float(d.mean()), float(np.percentile(d, PERCENTILE))
+    return Difference(float(d.mean()), float(np.percentile(d, PERCENTILE)), float((d >= SHIFT_STEPS).mean()))
 
 
 def images_match(actual: np.ndarray, expected: np.ndarray) -> bool:
     """Whether ``actual`` is ``expected`` up to driver noise (see the tolerances above)."""
-    mean, pct = image_difference(actual, expected)
-    return mean <= MEAN_TOLERANCE and pct <= PERCENTILE_TOLERANCE
+    d = image_difference(actual, expected)
+    return d.mean <= MEAN_TOLERANCE and d.pct <= PERCENTILE_TOLERANCE and d.shifted <= SHIFT_SHARE
 
 
 def save_failure(name: str, actual: np.ndarray, expected: np.ndarray, folder: Path) -> Path:

@@ -21,7 +21,7 @@ def test_simulate_writes_the_state(tmp_path):
         assert z["last_positions"].shape == (2500, 3)
         assert z["pinned"].sum() == 4
         assert (int(z["frames"]), int(z["simulation_steps"]), int(z["seed"])) == (5, 30, 0)
-    assert not list(tmp_path.glob(".*tmp*"))
+    assert list(tmp_path.iterdir()) == [out]  # no temporary left beside it
 
 
 def test_simulate_is_reproducible_through_the_cli(tmp_path):
@@ -157,6 +157,7 @@ def test_profile_lists_passes_and_what_was_skipped(tmp_path):
     assert "self-collision: simulation.self_collision is false" in r.stdout
     assert "colliders: scene has no sphere or plane" in r.stdout
     r = run_cli("simulate", "sphere", "--frames", "20", "--profile", "--out", str(tmp_path / "s.npz"))
+    assert r.returncode == 0, r.stderr
     assert "colliders" in r.stdout and "self-collision" in r.stdout and "bounding-box" in r.stdout
 
 

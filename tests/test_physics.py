@@ -9,6 +9,7 @@ import sys
 import numpy as np
 import pytest
 
+from clothsim.render.renderer import SPHERE_DRAW_SCALE
 from clothsim.scene import load_scene
 from clothsim.sim import Simulation
 from clothsim.sim.selfcollide import MODE_SPEC, self_collide, table_size
@@ -93,9 +94,10 @@ def test_nothing_deeper_than_the_tolerance_inside_the_sphere():
         sim.step()
         dist = np.linalg.norm(sim.positions - sphere.origin, axis=1)
         deepest = max(deepest, sphere.radius - dist.min())
-    # Collisions put points on the surface; only the Provot pass that follows can pull a
-    # point back in, by at most a fraction of a spring length (1/49 m) per substep.
-    assert deepest <= 0.1 * sphere.radius
+    # The renderer draws the sphere at SPHERE_DRAW_SCALE of its radius so that a cloth resting on
+    # the collider never shows the sphere through it: that holds only while no point sinks
+    # deeper than the remaining 8% of the radius (6.4 mm; 0.5 mm measured).
+    assert deepest <= (1.0 - SPHERE_DRAW_SCALE) * sphere.radius
 
 
 def test_self_collision_pushes_a_close_pair_apart_by_the_averaged_correction():
@@ -218,11 +220,13 @@ def test_self_collision_keeps_the_folded_cloth_apart():
         sim = Simulation(scene.with_simulation(self_collision=mode))
         sim.step(120)
         counts[mode] = close_pairs(sim, thickness)
-    # Without self-collision the crumpled cloth interpenetrates; with the spec's hash (same-cell
-    # only, corrections averaged and divided by simulation_steps) a few pairs stay closer than
-    # half the target distance 2*thickness; the 27-cell grid lets none through.
-    assert counts["off"] > 500
-    assert counts["spec"] <= 0.01 * scene.cloth.num_points
+    # Without self-collision the crumpled cloth interpenetrates (1127 pairs measured; at least
+    # one per 10 points shows the scene does fold); the spec's hash (same cell only, corrections
+    # averaged and divided by simulation_steps) misses pairs straddling a cell border, so a few
+    # stay closer than half the target distance 2*thickness, but it must remove nearly all of
+    # them; the 27-cell grid lets none through.
+    assert counts["off"] >= 0.1 * scene.cloth.num_points
+    assert counts["spec"] <= 0.05 * counts["off"]
     assert counts["grid"] == 0
 
 
@@ -242,6 +246,10 @@ def test_same_scene_twice_is_bit_identical(name):
 def test_result_does_not_depend_on_the_number_of_threads(name, tmp_path):
     # The kernels split work over the cores; each output element must still be computed the same
     # way, so one thread and two give the same bits.
+    if len(os.sched_getaffinity(0)) < 2:
+        # Two threads on one core cannot meet as a team, so the frame would run on one member and
+        # the test would compare one thread with one thread.
+        pytest.skip("needs 2 usable CPUs to run a team of two threads")
     outs = []
     for threads in ("1", "2"):
         out = tmp_path / f"{threads}.npz"

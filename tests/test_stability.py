@@ -6,6 +6,8 @@ import json
 import math
 from pathlib import Path
 
+import pytest
+
 from clothsim.bench.stability import measured_edges, sweep
 from clothsim.cli import main
 from clothsim.scene import load_scene
@@ -17,8 +19,10 @@ def test_gershgorin_bound_of_the_spec_scene() -> None:
     m = 150.0 / 2500
     # interior point: 4 structural + 4 shearing + 4 bending springs (x0.2) = 8.8 ks
     assert math.isclose(omega_max(scene), math.sqrt(2 * 8.8 * 5000.0 / m))
-    assert math.isclose(stable_dt(scene), 2 / omega_max(scene))
-    assert estimate_stable_substeps(scene) == math.ceil(1 / (90 * stable_dt(scene)))
+    # By hand: omega = sqrt(1,466,666.7) = 1211.06 rad/s, dt < 2 / omega = 1.6514 ms, and a
+    # 1/90 s frame needs 11.11 / 1.6514 = 6.73 -> 7 substeps.
+    assert stable_dt(scene) == pytest.approx(1.6514e-3, rel=1e-4)
+    assert estimate_stable_substeps(scene) == 7
     assert stability_warning(scene) is None  # the spec's 30 substeps are well inside
     assert estimate_stable_substeps(scene.with_simulation(integrator="xpbd")) is None
 

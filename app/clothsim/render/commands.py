@@ -185,13 +185,11 @@ def run_render(args: argparse.Namespace) -> int:
     if not fps > 0:
         raise ClothsimError(f"--video-fps: must be positive, got {fps}")
 
-    from ..sim.simulation import Simulation
-    from .renderer import Renderer
-
     from ..sim.rest import RestDetector
+    from ..sim.simulation import Simulation
 
     sim = Simulation(scene)
-    renderer = Renderer(*settings.size, samples=settings.samples)
+    renderer = _renderer(settings.size, settings.samples, size_label=_size_label(args, scene))
     rest = None if args.no_rest else RestDetector(scene.simulation.rest_tolerance, scene.simulation.rest_frames)
     if rest is not None:
         rest.update(sim._pos)
@@ -253,6 +251,23 @@ def run_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _size_label(args: argparse.Namespace, scene: Any) -> str:
+    """What set the image size, as the user wrote it: the flag, else the scene's field."""
+    if args.size is None and isinstance(scene.render, dict) and "size" in scene.render:
+        return f"{scene.path}: render.size"
+    return "--size"
+
+
+def _renderer(size: tuple[int, int], samples: int, size_label: str, **kwargs: Any) -> Any:
+    """A Renderer; an image too large for the driver or the memory names what set its size."""
+    from .renderer import Renderer, RenderSizeError
+
+    try:
+        return Renderer(*size, samples=samples, **kwargs)
+    except RenderSizeError as exc:
+        raise ClothsimError(f"{size_label}: {exc}") from None
+
+
 def _progress(total: int, desc: str) -> Any:
     try:
         from ..commands import progress
@@ -286,7 +301,7 @@ def run_bench_render(args: argparse.Namespace) -> int:
     """``clothsim bench render``: per-shader frames per second and a frame's time by stage."""
     from ..scene import load_scene
     from ..sim.simulation import Simulation
-    from .renderer import STAGES, Renderer
+    from .renderer import STAGES
 
     try:
         width, height = parse_size(args.size)
@@ -300,7 +315,7 @@ def run_bench_render(args: argparse.Namespace) -> int:
         raise ClothsimError("--frames and --repeats must be >= 1, --warmup >= 0")
     scene = load_scene(args.scene)
     sim = Simulation(scene)
-    renderer = Renderer(width, height, samples=args.samples, profile=True)
+    renderer = _renderer((width, height), args.samples, size_label="--size", profile=True)
     try:
         info = renderer.info()
         aa = f"{renderer.samples}x MSAA" if renderer.samples else "no MSAA"

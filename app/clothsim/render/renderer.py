@@ -17,7 +17,7 @@ import numpy as np
 
 from ..cloth import Springs
 from ..errors import ClothsimError
-from ..scene import Scene
+from ..scene import Scene, available_memory
 from . import mesh, textures
 from .camera import Camera, default_position, default_target
 from .context import create_context
@@ -33,6 +33,36 @@ UNIT_COLOR, UNIT_HEIGHT, UNIT_CUBE = 0, 1, 2
 SPHERE_DRAW_SCALE = 0.92
 FAMILY_COLORS = ((0.95, 0.35, 0.30), (0.35, 0.85, 0.45), (0.40, 0.60, 1.00))  # sRGB
 STAGES = ("mesh", "upload", "draw", "readback")
+
+
+# Mesa's llvmpipe addresses a buffer with 32-bit signed offsets (lp_limits.h), whatever
+# GL_MAX_RENDERBUFFER_SIZE says; measured with Mesa 22.3 / LLVM 15.
+LLVMPIPE_LIMIT = ("it holds at most 2 GiB in one buffer: with 4x multisampling up to 16384x8192 pixels, "
+                  "without 16384x16384")
+# Drivers that rasterise on the CPU keep their framebuffers in the process's own memory.
+_SOFTWARE = ("llvmpipe", "softpipe", "swrast", "lavapipe")
+
+
+class RenderSizeError(ClothsimError):
+    """The requested image is larger than the driver or the memory allows; the message says
+    which limit, and the command line prefixes it with the flag or scene field that set the size."""
+
+
+def framebuffer_bytes(width: int, height: int, samples: int, software: bool = True) -> int:
+    """Memory a Renderer of this size takes: 4-byte colour and 4-byte depth per sample, the
+    4-byte resolved colour, and the 3-byte image read back into NumPy. A hardware driver keeps
+    the framebuffers in its own memory, so only the read-back counts then."""
+    pixels = int(width) * int(height)
+    gl = pixels * (max(int(samples), 1) * (4 + 4) + 4) if software else 0
+    return gl + pixels * 3
+
+
+def _is_software(gl_renderer: str) -> bool:
+    return any(name in gl_renderer.lower() for name in _SOFTWARE)
+
+
+def _gib(n: int) -> str:
+    return f"{n / 2**30:.1f} GiB"
 
 
 class ClothState(Protocol):
@@ -70,18 +100,24 @@ class Renderer:
     def __init__(self, width: int = 800, height: int = 800, samples: int = 4, *,
                  sources: dict[str, tuple[str, str]] | None = None, profile: bool = False) -> None:
         if width < 1 or height < 1:
-            raise ClothsimError(f"image size must be positive, got {width}x{height}")
-        self.ctx = create_context()
+            raise RenderSizeError(f"image size must be positive, got {width}x{height}")
         self.width, self.height = int(width), int(height)
-        self.samples = max(0, min(int(samples), int(self.ctx.max_samples)))
         self.profile = profile
-        size = (self.width, self.height)
-        self._ms_color = self.ctx.renderbuffer(size, 4, samples=self.samples)
-        self._ms_depth = self.ctx.depth_renderbuffer(size, samples=self.samples)
-        self._ms_fbo = self.ctx.framebuffer(self._ms_color, self._ms_depth)
-        self._color = self.ctx.renderbuffer(size, 4)
-        self._fbo = self.ctx.framebuffer(self._color)
-        self.programs = Programs(self.ctx, sources)
+        self._framebuffer_objects: list[Any] = []
+        self.ctx = create_context()
+        try:
+            self.samples = max(0, min(int(samples), int(self.ctx.max_samples)))
+            self._check_size()
+            self._ms_color, self._ms_depth, self._ms_fbo, self._color, self._fbo = self._framebuffers()
+            self.programs = Programs(self.ctx, sources)
+        except BaseException:
+            # Nobody holds this Renderer yet, so nobody else can release what it made: a caller
+            # that catches the error (a size fallback, a test) would otherwise leak a context
+            # and up to gigabytes of framebuffer with it.
+            with self.ctx:
+                self._release_framebuffers()
+            self.ctx.release()
+            raise
         self._cloth: _ClothBuffers | None = None
         self._springs: Springs | None = None
         self._spring_ibo: Any = None
@@ -163,6 +199,7 @@ class Renderer:
         """Free every GL object and the context."""
         with self.ctx:
             self.programs.release()
+            self._release_framebuffers()
         self.ctx.release()
 
     def __enter__(self) -> "Renderer":
@@ -170,6 +207,55 @@ class Renderer:
 
     def __exit__(self, *exc: object) -> None:
         self.release()
+
+    # -- framebuffers ----------------------------------------------------------------------
+    def _check_size(self) -> None:
+        """Refuse, with the limit, an image the driver or the memory cannot hold, before
+        allocating anything (a driver may take seconds to fail, or succeed and swap)."""
+        info = self.ctx.info
+        limit_w = limit_h = int(info.get("GL_MAX_RENDERBUFFER_SIZE", 0)) or None
+        viewport = info.get("GL_MAX_VIEWPORT_DIMS")
+        if limit_w is not None and viewport:
+            limit_w, limit_h = min(limit_w, int(viewport[0])), min(limit_h, int(viewport[1]))
+        gl = str(info.get("GL_RENDERER", "this OpenGL driver"))
+        if limit_w is not None and (self.width > limit_w or self.height > limit_h):
+            raise RenderSizeError(f"image size {self.width}x{self.height} is larger than {gl} can draw "
+                                  f"({limit_w}x{limit_h} at most)")
+        need = framebuffer_bytes(self.width, self.height, self.samples, software=_is_software(gl))
+        avail = available_memory()
+        if need > avail:
+            raise RenderSizeError(f"image size {self.width}x{self.height} with {self._aa()} needs about "
+                                  f"{_gib(need)} of memory for its framebuffers and image, more than the "
+                                  f"{_gib(avail)} available; use a smaller size or fewer samples")
+
+    def _framebuffers(self) -> tuple[Any, Any, Any, Any, Any]:
+        import moderngl
+
+        size = (self.width, self.height)
+        made = self._framebuffer_objects
+        try:
+            made.append(self.ctx.renderbuffer(size, 4, samples=self.samples))
+            made.append(self.ctx.depth_renderbuffer(size, samples=self.samples))
+            made.append(self.ctx.framebuffer(made[0], made[1]))
+            made.append(self.ctx.renderbuffer(size, 4))
+            made.append(self.ctx.framebuffer(made[3]))
+        except moderngl.Error as exc:
+            # Drivers have limits of their own beyond the ones GL reports.
+            gl = str(self.ctx.info.get("GL_RENDERER", "this OpenGL driver"))
+            if "llvmpipe" in gl.lower():
+                why = LLVMPIPE_LIMIT
+            else:
+                why = "it refused: " + " ".join(str(exc).split())
+            raise RenderSizeError(f"image size {self.width}x{self.height} with {self._aa()} is more than "
+                                  f"{gl} can allocate ({why}); use a smaller size or fewer samples") from None
+        return made[0], made[1], made[2], made[3], made[4]
+
+    def _release_framebuffers(self) -> None:
+        while self._framebuffer_objects:
+            self._framebuffer_objects.pop().release()
+
+    def _aa(self) -> str:
+        return f"{self.samples}x multisampling" if self.samples else "no multisampling"
 
     # -- per-scene resources ---------------------------------------------------------------
     def _cloth_buffers(self, nw: int, nh: int) -> _ClothBuffers:
