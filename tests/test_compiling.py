@@ -1,0 +1,102 @@
+"""Compiling the kernels: the first-run notice, caching from a read-only install, and
+``clothsim compile`` / ``clothsim bench compile`` through the real CLI."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from conftest import REPO, run_cli
+
+NOTICE = "clothsim: compiling kernels for this CPU (first run only"
+
+
+def _read_only_mounts_work(folder: Path) -> str | None:
+    if shutil.which("unshare") is None:
+        return "unshare (util-linux) is not installed"
+    probe = subprocess.run(["unshare", "-rm", "sh", "-c", f"mount --bind {folder} {folder} && "
+                            f"mount -o remount,bind,ro {folder} && ! touch {folder}/probe 2>/dev/null"],
+                           capture_output=True, text=True)
+    if probe.returncode != 0:
+        return f"this machine does not allow a private read-only bind mount: {probe.stderr.strip()[:120]}"
+    return None
+
+
+def test_kernels_cache_from_a_read_only_install(tmp_path: Path) -> None:
+    # A system-wide install: the package folder cannot be written (here a read-only bind mount, which
+    # binds root as well), so Numba keeps the compiled kernels in the user's cache instead.
+    site = tmp_path / "site"
+    site.mkdir()
+    why = _read_only_mounts_work(site)
+    if why:
+        pytest.skip(why)
+    shutil.copytree(REPO / "app" / "clothsim", site / "clothsim",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
+    for data in ("scenes", "glsl"):
+        shutil.copytree(REPO / data, site / "clothsim" / data)
+    home = tmp_path / "home"
+    home.mkdir()
+    scene = tmp_path / "small.json"
+    scene.write_text('{"cloth": {"width": 1, "height": 1, "num_width_points": 8, "num_height_points": 8, '
+                     '"thickness": 0.01, "orientation": 0, "pinned": [[0, 0]], "damping": 0.2, "density": 150, '
+                     '"ks": 5000}, "simulation": {"self_collision": false}}')
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME", "PYTHONPATH")}
+    env.update(HOME=str(home), PYTHONPATH=str(site))
+    command = (f"mount --bind {site} {site} && mount -o remount,bind,ro {site} && "
+               f"exec {sys.executable} -m clothsim simulate {scene} --frames 2 --out {tmp_path}/s.npz")
+
+    def run() -> subprocess.CompletedProcess:
+        return subprocess.run(["unshare", "-rm", "sh", "-c", command], capture_output=True, text=True, env=env,
+                              cwd=tmp_path, timeout=600)
+
+    first = run()
+    assert first.returncode == 0, first.stderr
+    assert first.stderr.count(NOTICE) == 1
+    second = run()
+    assert second.returncode == 0, second.stderr
+    assert NOTICE not in second.stderr  # loaded from the cache: nothing compiled, nothing said
+    assert not list(site.rglob("*.nbi"))
+    assert list((home / ".cache" / "numba").rglob("*.nbi"))
+
+
+def test_compile_compiles_everything_ahead_of_time(tmp_path: Path) -> None:
+    first = run_cli("compile", timeout=900)
+    assert first.returncode == 0, first.stderr
+    lines = first.stdout.splitlines()
+    assert lines[0].split()[:2] == ["work", "item"]
+    items = [line for line in lines[1:-1]]
+    assert len(items) == 12 and any("self-collision grid, colliders" in i for i in items)
+    assert lines[-1].startswith("total")
+    # afterwards no command needs a compile: running it again loads every kernel
+    again = run_cli("compile", timeout=900)
+    assert again.returncode == 0, again.stderr
+    assert all(line.rstrip().endswith("(cached)") for line in again.stdout.splitlines()[1:-1])
+    assert NOTICE not in again.stderr
+    warm = run_cli("simulate", "sphere", "--frames", "2", "--self-collision", "grid", "--out", str(tmp_path / "s.npz"))
+    assert warm.returncode == 0, warm.stderr
+    assert NOTICE not in warm.stderr
+
+
+def test_bench_compile_reports_each_kernel_of_a_cold_start() -> None:
+    done = run_cli("bench", "compile", "--commands", "simulate", timeout=900)
+    assert done.returncode == 0, done.stderr
+    out = done.stdout
+    header, command = out.splitlines()[1], out.splitlines()[2]
+    assert header.split() == ["command", "/", "kernel", "wall", "compile"]
+    assert command.startswith("simulate: clothsim simulate pinned2 --frames 90")
+    wall, compile_s = (float(x) for x in command.split()[-2:])
+    assert 0 < compile_s < wall
+    assert "sim.frame._member [ClothState, SpecHash, -, -]" in out
+    assert "sim.frame.run_substeps" in out
+
+
+def test_bench_compile_rejects_an_unknown_command() -> None:
+    done = run_cli("bench", "compile", "--commands", "simulate,nope")
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines() == [
+        "clothsim: error: --commands: unknown command 'nope' (expected some of: simulate, render, sphere, grid, xpbd)"]
