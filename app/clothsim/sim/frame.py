@@ -218,7 +218,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         # skipping stays exact.
         margin = 0.0 if not self_on else col.self_margin
         cols = np.empty((2, 64))
-    gen = 0
+    gen = np.int64(0)
     for _ in range(steps):
         if integrate:
             lo, hi = share(spring_jobs, member, size)
