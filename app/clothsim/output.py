@@ -71,8 +71,9 @@ class FrameSink(Protocol):
 def open_output(path: str | os.PathLike[str], fps: float) -> Iterator[FrameSink]:
     """Yield a function that takes (H, W, 3) uint8 frames; the output appears only on success.
 
-    A ``.png`` keeps the last frame it is given; an MP4 is written to its temporary file as the
-    frames arrive, a GIF when the last one is in, and a folder gets one PNG per frame.
+    A ``.png`` keeps the last frame it is given; a GIF or MP4 is written to its temporary file
+    as the frames arrive (memory does not grow with the number of frames), and a folder gets
+    one PNG per frame.
     """
     fmt = output_format(path)
     dest, label = _destination(path)
@@ -152,28 +153,79 @@ class _DirSink(_Sink):
 
 
 class _GifSink(_Sink):
-    """Frames are quantised to a palette as they arrive (a few hundred KB each, not MB)."""
+    """An animated GIF written frame by frame as the frames arrive.
+
+    Pillow's multi-frame writer keeps every frame until the end (hundreds of MB for a long
+    800x800 render), and the common wrappers around it do the same, so the frames are encoded
+    one at a time with the GIF helpers Pillow publishes (``getheader``/``getdata``). The look is
+    what ``save(save_all=True, optimize=False, disposal=1, loop=0)`` gives: every frame quantised
+    to its own 255-colour palette (the first one's is the global palette), a later frame cropped
+    to the box where its colours differ from the frame before and carrying its own palette, a
+    frame identical to the one before merged into it by adding its duration, looping forever.
+    Held in memory: the colours of the last distinct frame and one frame waiting for its final
+    duration.
+    """
 
     def __init__(self, path: Path, fps: float, label: str) -> None:
         # GIF delays are in 1/100 s and viewers slow anything under 2/100 s down to 1/10 s.
         self.duration_ms = max(20, int(round(100.0 / fps)) * 10)
-        self.path = path
         self.label = label
-        self.frames: list[Any] = []
+        with os_errors(label):
+            self.file = open(path, "wb")  # noqa: SIM115 - closed in finish/abort
+        self.shown: Any = None
+        self.pending: tuple[Any, tuple[int, int, int, int] | None] | None = None
+        self.pending_ms = 0
+        self.count = 0
 
     def __call__(self, frame: np.ndarray) -> None:
-        from PIL import Image
+        from PIL import Image, ImageChops
 
-        self.frames.append(Image.fromarray(frame, "RGB").quantize(colors=255, method=Image.Quantize.MEDIANCUT,
-                                                                  dither=Image.Dither.NONE))
+        image = Image.fromarray(frame, "RGB").quantize(colors=255, method=Image.Quantize.MEDIANCUT,
+                                                       dither=Image.Dither.NONE)
+        shown = image.convert("RGB")  # the colours a viewer shows, which is what is compared
+        self.count += 1
+        box = None
+        if self.shown is not None:
+            box = ImageChops.difference(shown, self.shown).getbbox()
+            if box is None:
+                self.pending_ms += self.duration_ms
+                return
+        self._write_pending()
+        self.pending = (image, box)
+        self.pending_ms = self.duration_ms
+        self.shown = shown
+
+    def _write_pending(self) -> None:
+        from PIL import GifImagePlugin
+
+        if self.pending is None:
+            return
+        image, box = self.pending
+        if box is None:
+            chunks, _ = GifImagePlugin.getheader(image, info={"loop": 0, "duration": self.pending_ms})
+            chunks += GifImagePlugin.getdata(image, (0, 0), duration=self.pending_ms, disposal=1)
+        else:
+            if box != (0, 0, *image.size):
+                image = image.crop(box)
+            chunks = GifImagePlugin.getdata(image, box[:2], duration=self.pending_ms, disposal=1,
+                                            include_color_table=True)
+        with os_errors(self.label):  # flushed so that a full disk shows at this frame, not at the end
+            self.file.writelines(chunks)
+            self.file.flush()
+        self.pending = None
 
     def finish(self) -> None:
-        if not self.frames:
+        if self.count == 0:
+            self.abort()
             raise ClothsimError(f"{self.label}: no frame was rendered")
-        first, rest = self.frames[0], self.frames[1:]
+        self._write_pending()
         with os_errors(self.label):
-            first.save(self.path, format="GIF", save_all=True, append_images=rest, duration=self.duration_ms,
-                       loop=0, optimize=False, disposal=1)
+            self.file.write(b";")
+            self.file.close()
+
+    def abort(self) -> None:
+        with contextlib.suppress(OSError):
+            self.file.close()
 
 
 class _Mp4Sink(_Sink):
