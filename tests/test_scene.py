@@ -26,7 +26,6 @@ def test_bundled_scenes_are_the_course_scenes():
 
 def test_bundled_scene_found_by_name():
     assert load_scene("sphere").spheres[0].radius == 0.08
-    assert load_scene("sphere.json").spheres[0].radius == 0.08
 
 
 def test_defaults_of_the_simulation_object():

@@ -1,44 +1,339 @@
-"""Atomic output: write to a temporary name beside the target, rename on success."""
+"""Outputs that appear whole or not at all, and never destroy what clothsim did not create.
+
+A file output is written under a temporary name in the destination's own folder and renamed
+onto the destination at the end (``os.replace``), so a reader sees either the old file or the
+new one. Only a regular file is ever replaced: a folder, a device, a pipe or a socket at the
+destination is an error, raised before any temporary file exists.
+
+A frames folder (numbered ``frame_NNNNN.png`` files) is written as follows:
+
+* a folder that does not exist yet is built under a temporary name beside it and renamed
+  into place at the end, so it appears complete or not at all;
+* an existing folder is used only when it is empty or holds nothing but frame files of an
+  earlier render. The new frames are written into a hidden temporary sub-folder of it (the
+  same file system, so the final moves are renames that cannot run out of space; and nothing
+  is created outside the folder the user named, which matters for ``-o .``). At the end each
+  new frame is renamed onto its final name, replacing the old frame of that number, and only
+  then are the old frames beyond the new count deleted. A reader never sees a half-written
+  frame file; while those renames run it may see new frames next to old ones.
+
+A symbolic link at the destination is followed. Nothing is created on the file system mounted
+at ``/dev``. Whatever fails, or is interrupted, the temporary file or folder is removed, and
+so are the parent folders this module created for the output; what was there before is left
+as it was. Ctrl-C is held off only for the final renames and that cleanup. Every ``OSError``
+met on the way becomes one :class:`ClothsimError` line naming the path.
+"""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import re
 import shutil
+import signal
+import stat
 import tempfile
+import threading
 from collections.abc import Iterator
 from pathlib import Path
 
+from .errors import ClothsimError
+
+_FRAME = re.compile(r"frame_(\d{5,})\.png")
+# Long destination names must still leave room for the temporary name's additions (NAME_MAX).
+_STEM_MAX = 64
+
+
+def frame_name(index: int) -> str:
+    """The file name of frame ``index`` in a frames folder: ``frame_00012.png``."""
+    return f"frame_{index:05d}.png"
+
+
+def is_frame_name(name: str) -> bool:
+    """True for exactly the names :func:`frame_name` produces."""
+    m = _FRAME.fullmatch(name)
+    return m is not None and name == frame_name(int(m[1]))
+
+
+def os_error(label: str, exc: OSError, doing: str = "cannot write") -> ClothsimError:
+    """A one-line ``LABEL: DOING: reason`` error for an ``OSError`` met while writing LABEL."""
+    reason = " ".join((exc.strerror or str(exc) or type(exc).__name__).split())
+    return ClothsimError(f"{label}: {doing}: {reason}" if doing else f"{label}: {reason}")
+
 
 @contextlib.contextmanager
-def atomic_output(dest: str | Path, *, directory: bool = False) -> Iterator[Path]:
-    """Yield a temporary path next to ``dest``; move it onto ``dest`` if the block succeeds.
-
-    On any exception the temporary file (or directory) is removed and ``dest`` is left
-    untouched, so a failed run never leaves a half-written output behind. The temporary
-    name keeps the destination's suffix so that writers choosing a format by extension work.
-    """
-    dest = Path(dest)
-    parent = dest.parent if str(dest.parent) else Path(".")
-    parent.mkdir(parents=True, exist_ok=True)
-    if directory:
-        tmp = Path(tempfile.mkdtemp(prefix=f".{dest.name}.", suffix=".tmp", dir=parent))
-    else:
-        fd, name = tempfile.mkstemp(prefix=f".{dest.stem}.", suffix=f".tmp{dest.suffix}", dir=parent)
-        os.close(fd)
-        tmp = Path(name)
+def os_errors(label: str, doing: str = "cannot write") -> Iterator[None]:
+    """Re-raise an ``OSError`` from the block as a one-line :class:`ClothsimError` about LABEL."""
     try:
-        yield tmp
+        yield
+    except OSError as exc:
+        raise os_error(label, exc, doing) from None
+
+
+def check_destination(dest: str | os.PathLike[str], *, directory: bool = False,
+                      label: str | None = None) -> None:
+    """Fail fast: raise :class:`ClothsimError` if ``dest`` could not be written.
+
+    Runs every check :func:`atomic_output` runs (what is at the destination, the frames-folder
+    rule, parents that are files) and also proves that the nearest existing folder on the way
+    to the destination is writable, by creating and removing an empty file there. Call it
+    before any long computation whose result would go to ``dest``.
+    """
+    label = _label(Path(dest), label)
+    _, home = _inspect(Path(dest), directory, label)
+    probe_in = _nearest_existing(home)
+    with os_errors(label, f"cannot write in {probe_in}"):
+        fd, probe = tempfile.mkstemp(prefix=".clothsim-", suffix=".probe", dir=probe_in)
+        os.close(fd)
+        os.unlink(probe)
+
+
+@contextlib.contextmanager
+def atomic_output(dest: str | os.PathLike[str], *, directory: bool = False, label: str | None = None,
+                  block_writes: bool = True) -> Iterator[Path]:
+    """Yield a temporary path for ``dest`` (a file, or a frames folder if ``directory``).
+
+    If the block succeeds the temporary output is moved onto ``dest`` as the module docstring
+    describes; if it raises (``KeyboardInterrupt`` included) it is removed and ``dest`` is left
+    as it was. A file's temporary name keeps the destination's suffix, so that writers choosing
+    a format by extension work. ``label`` is how errors name the destination (default: ``dest``).
+    A symbolic link at ``dest`` is followed: the file or folder it points to is written.
+
+    ``block_writes`` says the block does nothing but write the temporary output, so an
+    ``OSError`` it raises is a write failure and is reported as one line; pass ``False`` when
+    the block runs other work too and converts its own write errors.
+    """
+    label = _label(Path(dest), label)
+    dest, home = _inspect(Path(dest), directory, label)
+    created = _make_parents(home, label)
+    try:
+        with os_errors(label, f"cannot write in {home}"):
+            tmp = _make_temporary(dest, home, directory)
     except BaseException:
-        if tmp.is_dir():
-            shutil.rmtree(tmp, ignore_errors=True)
-        else:
-            tmp.unlink(missing_ok=True)
+        _remove_folders(created)
         raise
-    # mkstemp/mkdtemp create private files; give the result the usual permissions.
+    try:
+        if block_writes:
+            with os_errors(label):
+                yield tmp
+        else:
+            yield tmp
+        with _no_interrupts(), os_errors(label):
+            if directory:
+                _commit_folder(tmp, dest, home)
+            else:
+                _commit_file(tmp, dest)
+    except BaseException:
+        with _no_interrupts():
+            _remove(tmp)
+            _remove_folders(created)
+        raise
+
+
+# -- checks --------------------------------------------------------------------------------------
+def _label(dest: Path, label: str | None) -> str:
+    return label if label is not None else str(dest)
+
+
+def _inspect(dest: Path, directory: bool, label: str) -> tuple[Path, Path]:
+    """Check what is at ``dest`` and above it.
+
+    Returns the path to write (``dest`` with a symbolic link followed) and the folder that will
+    hold the temporary output: the destination itself for an existing frames folder, else its
+    parent (which may not exist yet).
+    """
+    if dest.is_symlink():
+        dest = Path(os.path.realpath(dest))
+    try:
+        st = dest.stat()
+    except FileNotFoundError:
+        st = None
+    except NotADirectoryError:
+        raise ClothsimError(f"{label}: {_file_ancestor(dest)} is a file, not a folder") from None
+    except OSError as exc:
+        raise os_error(label, exc, "cannot check") from None
+    if directory:
+        if st is not None and not stat.S_ISDIR(st.st_mode):
+            raise ClothsimError(f"{label}: exists and is not a folder (a frames folder needs a folder)")
+        if st is not None:
+            _check_folder_is_ours(dest, label)
+            return dest, dest
+    elif st is not None:
+        if stat.S_ISDIR(st.st_mode):
+            raise ClothsimError(f"{label}: is a folder, not a file; choose a file name")
+        if not stat.S_ISREG(st.st_mode):
+            raise ClothsimError(f"{label}: not a regular file (a device, pipe or socket is never replaced)")
+    ancestor = _nearest_existing(dest.parent)
+    try:
+        is_folder = ancestor.is_dir()
+    except OSError as exc:
+        raise os_error(label, exc, "cannot check") from None
+    if not is_folder:
+        raise ClothsimError(f"{label}: {ancestor} is a file, not a folder")
+    if _holds_devices(ancestor):
+        raise ClothsimError(f"{label}: will not write in {ancestor} (a file system of device files)")
+    return dest, dest.parent
+
+
+def _holds_devices(folder: Path) -> bool:
+    """True for a folder on the file system mounted at /dev (not /dev/shm or another mount).
+
+    As root, anything can be created there; an output (or its temporary file) in /dev is a
+    slip of the keyboard, not a place to keep images.
+    """
+    try:
+        dev = os.stat("/dev").st_dev
+        return dev != os.stat("/").st_dev and os.stat(folder).st_dev == dev
+    except OSError:
+        return False
+
+
+def _nearest_existing(folder: Path) -> Path:
+    """``folder`` or the nearest of its parents that exists (as anything)."""
+    for candidate in (folder, *folder.parents):
+        if os.path.lexists(candidate):
+            return candidate
+    return folder
+
+
+def _file_ancestor(path: Path) -> Path:
+    """The first component of ``path`` that exists and is not a folder (for error messages)."""
+    for candidate in reversed(path.parents):
+        if candidate.exists() and not candidate.is_dir():
+            return candidate
+    return path.parent
+
+
+def _check_folder_is_ours(folder: Path, label: str) -> None:
+    with os_errors(label, "cannot read the folder"):
+        with os.scandir(folder) as entries:
+            foreign = sum(1 for e in entries if not (is_frame_name(e.name) and e.is_file(follow_symlinks=False)))
+    if foreign:
+        files = "file" if foreign == 1 else "files"
+        raise ClothsimError(f"{label}: folder is not empty ({foreign} {files} not written by clothsim); "
+                            "choose another or empty it")
+
+
+# -- temporary output and commit -----------------------------------------------------------------
+def _make_parents(home: Path, label: str) -> list[Path]:
+    """Create ``home`` and its missing parents; return the folders created, outermost first."""
+    missing = []
+    for folder in (home, *home.parents):
+        if folder.exists():
+            break
+        missing.append(folder)
+    created: list[Path] = []
+    try:
+        with os_errors(label, "cannot create the folder"):
+            for folder in reversed(missing):
+                folder.mkdir()
+                created.append(folder)
+    except BaseException:
+        _remove_folders(created)
+        raise
+    return created
+
+
+def _make_temporary(dest: Path, home: Path, directory: bool) -> Path:
+    if directory and home == dest:
+        return Path(tempfile.mkdtemp(prefix=".clothsim-frames.", suffix=".tmp", dir=home))
+    stem = (dest.name if directory else dest.stem)[:_STEM_MAX]
+    if directory:
+        return Path(tempfile.mkdtemp(prefix=f".{stem}.", suffix=".tmp", dir=home))
+    fd, name = tempfile.mkstemp(prefix=f".{stem}.", suffix=f".tmp{dest.suffix}", dir=home)
+    os.close(fd)
+    return Path(name)
+
+
+def _commit_file(tmp: Path, dest: Path) -> None:
+    try:
+        mode = stat.S_IMODE(dest.stat().st_mode)  # a replaced file keeps its permissions
+    except FileNotFoundError:
+        mode = 0o666 & ~_umask()
+    os.chmod(tmp, mode)  # mkstemp creates files only the owner can read
+    _fsync(tmp)
+    os.replace(tmp, dest)
+    _fsync_folder(dest.parent)
+
+
+def _commit_folder(tmp: Path, dest: Path, home: Path) -> None:
+    names = sorted(os.listdir(tmp))
+    for name in names:
+        _fsync(tmp / name)
+    if home == dest:  # an existing folder: move the frames in, then drop the old ones beyond them
+        for name in names:
+            os.replace(tmp / name, dest / name)
+        new = set(names)
+        with os.scandir(dest) as entries:
+            stale = [e.name for e in entries
+                     if e.name not in new and is_frame_name(e.name) and e.is_file(follow_symlinks=False)]
+        for name in stale:
+            (dest / name).unlink(missing_ok=True)
+        os.rmdir(tmp)
+        _fsync_folder(dest)
+    else:
+        os.chmod(tmp, 0o777 & ~_umask())  # mkdtemp creates folders only the owner can enter
+        os.rename(tmp, dest)
+        _fsync_folder(dest.parent)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            path.unlink(missing_ok=True)
+
+
+def _remove_folders(created: list[Path]) -> None:
+    for folder in reversed(created):
+        with contextlib.suppress(OSError):
+            folder.rmdir()  # only if still empty: something else may have been put there meanwhile
+
+
+def _umask() -> int:
     umask = os.umask(0)
     os.umask(umask)
-    os.chmod(tmp, (0o777 if directory else 0o666) & ~umask)
-    if directory and dest.is_dir():
-        shutil.rmtree(dest)
-    os.replace(tmp, dest)
+    return umask
+
+
+def _fsync(path: Path) -> None:
+    # Without it a crash soon after the rename can leave an empty file under the final name, and
+    # some file systems (NFS, quotas) report a full disk only here.
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def _fsync_folder(folder: Path) -> None:
+    # Makes the rename itself durable; not every file system lets a folder be synced.
+    with contextlib.suppress(OSError):
+        fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+@contextlib.contextmanager
+def _no_interrupts() -> Iterator[None]:
+    """Hold off Ctrl-C while moving outputs into place or cleaning up.
+
+    A second Ctrl-C during cleanup would otherwise leave the temporary output behind, and one
+    during the final renames would leave a frames folder half old, half new. The signal is
+    ignored for these few file operations; the run is already ending either way.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is None:  # installed outside Python: it could not be put back
+        yield
+        return
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)

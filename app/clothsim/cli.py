@@ -11,8 +11,8 @@ from . import __version__
 from .errors import ClothsimError
 
 EPILOG = """\
-scenes: a path to a course scene file (JSON with cloth/sphere/plane), or the name of a bundled
-scene: pinned2, pinned4, sphere, plane, selfCollision.
+scenes: a path to a course scene file (JSON with cloth/sphere/plane), or the bare name (no / and
+no .json) of a bundled scene: pinned2, pinned4, sphere, plane, selfCollision.
 
 examples:
   clothsim simulate scenes/sphere.json --frames 180 --out sphere.npz

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_output
+from .atomic import atomic_output, check_destination
 from .errors import ClothsimError
 from .scene import Scene, load_scene
 
@@ -105,6 +105,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix != ".npz":
         raise ClothsimError(f"--out: {out}: expected a .npz file name")
+    check_destination(out, label=args.out)  # before the simulation, not after it
     scene = apply_overrides(load_scene(args.scene), args)
     sim = Simulation(scene)
     rest = RestDetector(scene.simulation.rest_tolerance, scene.simulation.rest_frames) if args.until_rest else None
@@ -128,7 +129,7 @@ def run_simulate(args: argparse.Namespace) -> int:
                 rested_at = sim.frame
                 break
     elapsed = time.perf_counter() - start
-    with atomic_output(out) as tmp:
+    with atomic_output(out, label=args.out) as tmp:
         with open(tmp, "wb") as fh:
             np.savez(
                 fh,

@@ -123,31 +123,48 @@ def bundled_scene_names() -> list[str]:
 
 
 def resolve_scene_path(name_or_path: str | os.PathLike[str]) -> Path:
-    """Return a file path for a scene given as a path or as a bundled scene name.
+    """Return the file of a scene given as a path or as a bundled scene's name.
 
-    ``sphere``, ``sphere.json`` and ``scenes/sphere.json`` all find the bundled scene when no
-    such file exists relative to the working directory.
+    Only a bare name (no path separator, no ``.json`` suffix) names a bundled scene:
+    ``sphere`` is the bundled sphere scene, while ``sphere.json``, ``scenes/sphere.json`` and
+    ``/any/dir/sphere.json`` are paths and must exist; a mistyped path never falls back to a
+    bundled scene. A bare name that is not bundled is a path too (``./sphere`` reaches a local
+    file of that name). A scene file must be a regular file.
     """
-    p = Path(name_or_path)
-    if p.is_file():
-        return p
-    stem = p.name[:-5] if p.name.endswith(".json") else p.name
-    candidate = data_dir("scenes") / f"{stem}.json"
-    if candidate.is_file():
-        return candidate
-    if p.exists():
+    text = os.fspath(name_or_path)
+    p = Path(text)
+    bare = bool(text) and text not in (".", "..") and not text.endswith(".json") and not any(
+        sep in text for sep in (os.sep, os.altsep) if sep)
+    if bare:
+        candidate = data_dir("scenes") / f"{text}.json"
+        if candidate.is_file():
+            return candidate
+    try:
+        exists, is_dir, is_file = p.exists(), p.is_dir(), p.is_file()
+    except OSError as exc:
+        raise ClothsimError(f"{p}: cannot read scene file: {exc.strerror or exc}") from None
+    if not exists:
+        names = ", ".join(bundled_scene_names())
+        hint = ""
+        if p.name.endswith(".json") and p.name[:-5] in bundled_scene_names():
+            hint = f"; the bundled scene is named without a path or .json: {p.name[:-5]}"
+        raise ClothsimError(f"{p}: no such scene file (bundled scenes: {names}){hint}")
+    if is_dir:
         raise ClothsimError(f"{p}: not a scene file (it is a directory)")
-    names = ", ".join(bundled_scene_names())
-    raise ClothsimError(f"{p}: no such scene file (bundled scenes: {names})")
+    if not is_file:
+        raise ClothsimError(f"{p}: not a regular file")
+    return p
 
 
 def load_scene(path: str | os.PathLike[str]) -> Scene:
-    """Load and validate a scene file (a path, or the name of a bundled scene)."""
+    """Load and validate a scene file (a path, or the bare name of a bundled scene)."""
     p = resolve_scene_path(path)
     try:
         text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ClothsimError(f"{p}: cannot read scene file: {exc}") from None
+    except OSError as exc:
+        raise ClothsimError(f"{p}: cannot read scene file: {exc.strerror or exc}") from None
+    except UnicodeDecodeError as exc:
+        raise ClothsimError(f"{p}: cannot read scene file: not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     return parse_scene(text, str(p))
 
 

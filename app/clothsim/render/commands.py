@@ -167,7 +167,7 @@ def run_render(args: argparse.Namespace) -> int:
     from .. import output
     from ..scene import load_scene
 
-    fmt = output.output_format(args.output)  # fail on a bad suffix before any work
+    fmt = output.check_output(args.output)  # fail on an output we could not write before any work
     if args.frames < 0:
         raise ClothsimError(f"--frames: must be >= 0, got {args.frames}")
     every = args.every if args.every is not None else (1 if fmt == "dir" else 3)
