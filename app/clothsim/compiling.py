@@ -9,6 +9,9 @@ cache compiles nothing, and then nothing here prints anything.
 from __future__ import annotations
 
 import json
+import os
+import pickle
+import subprocess
 import sys
 import threading
 import time
@@ -131,6 +134,75 @@ def install_notice(stream: TextIO = sys.stderr) -> CompileNotice:
 
 
 # ---------------------------------------------------------------------------------------------
+# A cold start on two cores
+
+#: Set to 1 to compile everything in this process (no second process on a cold start).
+JOBS_VARIABLE = "CLOTHSIM_COMPILE_JOBS"
+_CHILD = ("import importlib, pickle, sys; module, name, argtypes = pickle.load(sys.stdin.buffer); "
+          "getattr(importlib.import_module(module), name).compile(argtypes)")
+
+
+def side_kernels() -> None:
+    """Compile (or load) the small kernels every command meets after its first frame: the blow-up
+    guard, the rest detector and the renderer's mesh kernel, with the argument types they get."""
+    import numpy as np
+
+    from .render import mesh
+    from .sim.guard import _frame_sums
+    from .sim.rest import max_displacement
+
+    state = np.zeros((3, 4))
+    _frame_sums(state, state, np.zeros(1, dtype=np.int32), np.zeros((4, 3)).T)
+    max_displacement(state, state)
+    mesh.update_cloth_vertices(np.zeros((4, 3)), 2, 2, True, np.zeros((4, mesh.CLOTH_FLOATS), dtype=np.float32))
+
+
+def _is_cached(dispatcher: Any, argtypes: tuple) -> bool:
+    if argtypes in dispatcher.overloads:
+        return True
+    cache = getattr(dispatcher, "_cache", None)
+    try:
+        return cache is not None and cache.load_overload(argtypes, dispatcher.targetctx) is not None
+    except Exception:  # noqa: BLE001 - an unreadable cache entry is a miss
+        return False
+
+
+def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], None]) -> None:
+    """Compile ``dispatcher`` for ``argtypes`` into the on-disk cache in a second process while
+    ``meanwhile()`` compiles the rest here; the caller then loads it from the cache.
+
+    Numba compiles one function at a time per process (a global lock), so a cold start on two
+    cores otherwise leaves one idle. The wait shows as the kernel's own compile (the notice and
+    ``clothsim bench compile`` see it so). With one core, with ``CLOTHSIM_COMPILE_JOBS=1``, when
+    the kernel is cached already, or when the second process fails, nothing is done here and the
+    caller's compile happens in this process as usual.
+    """
+    from .sim.team import available_cores
+
+    if os.environ.get(JOBS_VARIABLE) == "1" or available_cores() < 2 or _is_cached(dispatcher, argtypes):
+        meanwhile()
+        return
+    func = dispatcher.py_func
+    try:
+        child = subprocess.Popen([sys.executable, "-c", _CHILD], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL)
+        child.stdin.write(pickle.dumps((func.__module__, func.__name__, argtypes)))
+        child.stdin.close()
+    except OSError:
+        meanwhile()
+        return
+    try:
+        meanwhile()
+        with event.trigger_event("numba:compile", data={"dispatcher": dispatcher, "args": argtypes,
+                                                        "return_type": None}):
+            child.wait()
+    finally:
+        if child.poll() is None:  # interrupted: the second process goes too
+            child.kill()
+            child.wait()
+
+
+# ---------------------------------------------------------------------------------------------
 # Ahead of time
 
 
@@ -152,8 +224,6 @@ def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet"
 def work_items() -> list[tuple[str, Callable[[], None]]]:
     """Everything ``clothsim compile`` compiles: each frame-kernel plan (self-collision mode x
     colliders), each other integrator, the rest detector and the renderer's mesh kernel."""
-    import numpy as np
-
     from .sim import Simulation
 
     def step(scene) -> Callable[[], None]:  # noqa: ANN001
@@ -165,19 +235,7 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
               for name in ("symplectic_euler", "implicit_euler", "xpbd")]
     items.append(("verlet, rate damping", step(_tiny_scene("spec", True, "verlet", "rate"))))
 
-    def rest() -> None:
-        from .sim.rest import max_displacement
-
-        a = np.zeros((3, 4))
-        max_displacement(a, a)
-
-    def mesh() -> None:
-        from .render import mesh as cloth_mesh
-
-        out = np.zeros((4, cloth_mesh.CLOTH_FLOATS), dtype=np.float32)
-        cloth_mesh.update_cloth_vertices(np.zeros((4, 3)), 2, 2, True, out)
-
-    items += [("rest detector", rest), ("render: cloth mesh", mesh)]
+    items.append(("guard, rest detector, render mesh", side_kernels))
     return items
 
 

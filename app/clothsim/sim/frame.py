@@ -356,6 +356,14 @@ def _call_member(typingctx, address, member, size, steps, st, spec, grid, col, s
 
 @lru_cache(maxsize=None)
 def _member_address(argtypes: tuple) -> int:
+    from ..compiling import compile_elsewhere, side_kernels
+
+    def meanwhile() -> None:
+        i64 = types.int64
+        run_substeps.compile((i64, *argtypes[3:8], i64, i64, i64))
+        side_kernels()
+
+    compile_elsewhere(_member, argtypes, meanwhile)
     _member.compile(argtypes)
     cres = _member.overloads[argtypes]
     return cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
