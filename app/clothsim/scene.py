@@ -191,6 +191,15 @@ def check_field(section: str, name: str, value: Any) -> Any:
 MAX_SUBSTEPS = 1_000_000
 MAX_SEED = 2**63 - 1
 MAX_SIDE = 2**31 - 1
+# Physical quantities are bounded far beyond any cloth (the course uses 1 m, 150 kg/m^2, ks 5000,
+# 90 frames/s) so that what the step derives from them stays a finite, non-zero float64 for any
+# combination: the mass per point (1e-28 kg at least), the substep (1e-12 s at least, and its
+# square) and the stable-step estimate (ks / mass). Without the bounds, e.g. ks = 1e308 or
+# frames_per_sec = 1e200 ended the stability check in a ZeroDivisionError.
+MIN_LENGTH, MAX_LENGTH = 1e-6, 1e6
+MIN_DENSITY, MAX_DENSITY = 1e-6, 1e6
+MAX_KS = 1e12
+MIN_FPS, MAX_FPS = 1e-3, 1e6
 
 
 def _pinned(done: dict[str, Any]) -> V.Rule:
@@ -220,16 +229,16 @@ _ORIENTATION = V.choice((), aliases={0: HORIZONTAL, 1: VERTICAL, "horizontal": H
                         expected='0/"horizontal" or 1/"vertical"', fold_case=True)
 
 CLOTH = V.record({
-    "width": V.required(V.number(gt=0.0)),
-    "height": V.required(V.number(gt=0.0)),
+    "width": V.required(V.number(ge=MIN_LENGTH, le=MAX_LENGTH)),
+    "height": V.required(V.number(ge=MIN_LENGTH, le=MAX_LENGTH)),
     "num_width_points": V.required(V.integer(ge=2, le=MAX_SIDE)),
     "num_height_points": V.required(V.integer(ge=2, le=MAX_SIDE)),
     "thickness": V.required(V.number(gt=0.0)),
     "orientation": V.required(_ORIENTATION),
     "pinned": V.Field(depends=_pinned, default=()),
     "damping": V.required(V.number(ge=0.0, le=100.0)),
-    "density": V.required(V.number(gt=0.0)),
-    "ks": V.required(V.number(ge=0.0)),
+    "density": V.required(V.number(ge=MIN_DENSITY, le=MAX_DENSITY)),
+    "ks": V.required(V.number(ge=0.0, le=MAX_KS)),
     "enable_structural": V.default(V.boolean, True),
     "enable_shearing": V.default(V.boolean, True),
     "enable_bending": V.default(V.boolean, True),
@@ -249,11 +258,12 @@ PLANE = V.record({
 
 _SIM_DEFAULTS = SimulationSpec()
 SIMULATION = V.record({
-    "frames_per_sec": V.default(V.number(gt=0.0), _SIM_DEFAULTS.frames_per_sec),
+    "frames_per_sec": V.default(V.number(ge=MIN_FPS, le=MAX_FPS), _SIM_DEFAULTS.frames_per_sec),
     "simulation_steps": V.default(V.integer(ge=1, le=MAX_SUBSTEPS), _SIM_DEFAULTS.simulation_steps),
     "gravity": V.default(V.vec3(), _SIM_DEFAULTS.gravity),
     "self_collision": V.default(
-        V.choice(("spec", "grid"), aliases={True: "spec", False: "off"}, expected='true, false, "spec" or "grid"'),
+        V.choice(SELF_COLLISION_MODES, aliases={True: "spec", False: "off"},
+                 expected='true, false, "spec", "grid" or "off"'),
         _SIM_DEFAULTS.self_collision),
     "seed": V.default(V.integer(ge=0, le=MAX_SEED), _SIM_DEFAULTS.seed),
     "integrator": V.default(V.choice(INTEGRATORS), _SIM_DEFAULTS.integrator),

@@ -120,10 +120,9 @@ def _bound(x: float) -> str:
 
 
 def _bounds_text(ge: float | None, gt: float | None, le: float | None) -> str:
-    low = f">= {_bound(ge)}" if ge is not None else f"> {_bound(gt)}" if gt is not None else ""
-    if low and le is not None:
-        return f"between {_bound(ge)} and {_bound(le)}" if ge is not None else f"{low} and <= {_bound(le)}"
-    return low or f"<= {_bound(le)}"
+    if ge is not None:
+        return f">= {_bound(ge)}"
+    return f"> {_bound(gt)}" if gt is not None else f"<= {_bound(le)}"
 
 
 class number:  # noqa: N801 - rules read like types in a schema
@@ -138,14 +137,12 @@ class number:  # noqa: N801 - rules read like types in a schema
                 and (self.le is None or x <= self.le))
 
     def bounds_problem(self, value: Any) -> str:
-        """The message for a value outside the bounds: the bound it breaks (all of them for NaN)."""
+        """The message for a value outside the bounds: the bound it breaks (NaN breaks the lower)."""
         x = value if isinstance(value, numbers.Integral) else float(value)
-        if self.le is not None and x > self.le:
+        if self.le is not None and (x > self.le or (self.ge is None and self.gt is None)):
             text = _bounds_text(None, None, self.le)
-        elif (self.ge is not None and x < self.ge) or (self.gt is not None and x <= self.gt):
-            text = _bounds_text(self.ge, self.gt, None)
         else:
-            text = _bounds_text(self.ge, self.gt, self.le)
+            text = _bounds_text(self.ge, self.gt, None)
         return f"must be {text}, got {shown(value)}"
 
     def __call__(self, value: Any, at: At) -> float:
