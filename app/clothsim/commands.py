@@ -11,7 +11,7 @@ import numpy as np
 
 from .atomic import atomic_output
 from .errors import ClothsimError
-from .scene import SIMULATION, Scene, load_scene
+from .scene import SIMULATION, Scene, check_memory, load_scene
 from .validate import At, check, integer
 
 
@@ -46,6 +46,7 @@ def apply_overrides(scene: Scene, args: argparse.Namespace) -> Scene:
         changes["integrator"] = args.integrator
     if changes:
         scene = scene.with_simulation(**changes)
+        check_memory(scene)  # another integrator keeps more per point
     return _stability_check(scene, args.auto_substeps)
 
 
