@@ -224,7 +224,7 @@ def _pinned(done: dict[str, Any]) -> V.Rule:
 
 
 def _unit(v: tuple[float, float, float], at: V.At) -> tuple[float, float, float]:
-    length = math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    length = math.hypot(*v)
     return (v[0] / length, v[1] / length, v[2] / length)
 
 
@@ -295,7 +295,7 @@ SCENE = V.record({
     "plane": V.default(V.one_or_many(V.then(PLANE, lambda v, at: PlaneSpec(**v))), (), dest="planes"),
     "simulation": V.default(_simulation, _SIM_DEFAULTS, dest="simulation"),
     "render": V.default(_render, None),
-}, unknown_is_error=True)
+}, unknown="unknown top-level object (expected one of: cloth, sphere, plane, simulation, render)")
 
 
 # ----------------------------------------------------------------------------------------------

@@ -16,7 +16,6 @@ import json
 import math
 import numbers
 import warnings
-from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Mapping
 
 from .errors import FieldError, SceneError
@@ -31,14 +30,21 @@ class SceneWarning(UserWarning):
     """A scene loaded, but something in it was ignored (e.g. an unknown key)."""
 
 
-@dataclass(frozen=True)
 class At:
     """Where a value came from: ``source`` (a file name, or None), its field ``path`` and a ``label``
     that turns a field path into what the user typed (e.g. a flag); errors and warnings name both."""
 
-    source: str | None = None
-    path: str = ""
-    label: Callable[[str], str] | None = None
+    # A plain class, not a dataclass: generating a dataclass costs about a millisecond of import,
+    # which every CLI call pays.
+    __slots__ = ("source", "path", "label")
+
+    def __init__(self, source: str | None = None, path: str = "", label: Callable[[str], str] | None = None) -> None:
+        self.source = source
+        self.path = path
+        self.label = label
+
+    def __repr__(self) -> str:
+        return f"At({self.source!r}, {self.path!r})"
 
     def key(self, name: Any) -> "At":
         """The location of ``name`` inside this object."""
@@ -83,7 +89,7 @@ def shown(value: Any) -> str:
         n = int(value)
         # Python refuses to print integers of more than 4300 digits; huge ones are shown by size.
         if n.bit_length() > 64:
-            return f"{'-' if n < 0 else ''}an integer of about 10^{int(n.bit_length() * math.log10(2))}"
+            return f"an integer of about {'-' if n < 0 else ''}10^{int(n.bit_length() * math.log10(2))}"
         return str(n)
     if isinstance(value, numbers.Real):
         return repr(float(value))
@@ -151,7 +157,7 @@ class number:  # noqa: N801 - rules read like types in a schema
         try:
             x = float(value)
         except OverflowError:  # an integer beyond the float range
-            x = math.copysign(math.inf, value)
+            x = math.inf if value > 0 else -math.inf
         if not self.in_bounds(x):
             raise at.fail(self.bounds_problem(value))
         if not math.isfinite(x):
@@ -253,7 +259,7 @@ def vec3(component: Rule | None = None, *, nonzero: bool = False) -> Rule:
         if len(items) != 3:
             raise at.fail(f"expected 3 numbers, got {len(items)}")
         x, y, z = (each(c, at.index(i)) for i, c in enumerate(items))
-        if nonzero and not math.sqrt(x * x + y * y + z * z) > 1e-12:
+        if nonzero and not math.hypot(x, y, z) > 1e-12:
             raise at.fail("has zero length")
         return (x, y, z)
     return check
@@ -288,18 +294,21 @@ def one_or_many(item: Rule) -> Rule:
 _REQUIRED = object()
 
 
-@dataclass(frozen=True)
 class Field:
     """One key of an object: its rule, whether it may be left out (then ``default`` is used, when
     given), and ``dest``, the name the result goes under (default: the key). ``rule`` may instead
     be ``depends``: a function of the fields already checked that returns the rule (e.g. pinned
     indices bounded by the grid size)."""
 
-    rule: Rule | None = None
-    default: Any = _REQUIRED
-    dest: str | None = None
-    depends: Callable[[dict[str, Any]], Rule] | None = None
-    optional: bool = False
+    __slots__ = ("rule", "default", "dest", "depends", "optional")
+
+    def __init__(self, rule: Rule | None = None, default: Any = _REQUIRED, dest: str | None = None,
+                 depends: Callable[[dict[str, Any]], Rule] | None = None, optional: bool = False) -> None:
+        self.rule = rule
+        self.default = default
+        self.dest = dest
+        self.depends = depends
+        self.optional = optional
 
     @property
     def required(self) -> bool:
@@ -332,16 +341,17 @@ def optional(rule: Rule, *, dest: str | None = None) -> Field:
 class record:  # noqa: N801
     """A JSON object with known keys, checked in the order given; returns a dict of the results.
 
-    Unknown keys are warned about (course files in the wild carry extra keys), or refused when
-    ``unknown_is_error`` (the file's top level, where a misspelt object would be lost silently).
+    Unknown keys are warned about (course files in the wild carry extra keys), or refused with
+    the problem ``unknown`` (e.g. at a file's top level, where a misspelt object would be lost).
     """
 
-    def __init__(self, fields: Mapping[str, Field], *, unknown_is_error: bool = False) -> None:
+    def __init__(self, fields: Mapping[str, Field], *, unknown: str | None = None) -> None:
         self.fields = dict(fields)
-        self.unknown_is_error = unknown_is_error
+        self.unknown = unknown
 
     def check_one(self, key: str, value: Any, at: At) -> Any:
-        """Check the value of one key alone (a setter changing one field); ``at`` names it."""
+        """Check the value of one key alone (a setter changing one field); ``at`` names it.
+        Only for keys whose rule does not depend on other fields."""
         return self.fields[key].rule_for({})(value, at)
 
     def __call__(self, value: Any, at: At) -> dict[str, Any]:
@@ -349,8 +359,8 @@ class record:  # noqa: N801
             raise at.fail(f"expected an object, got {shown(value)}")
         for key in value:
             if key not in self.fields:
-                if self.unknown_is_error:
-                    raise at.key(key).fail(f"unknown top-level object (expected one of: {', '.join(self.fields)})")
+                if self.unknown is not None:
+                    raise at.key(key).fail(self.unknown)
                 at.key(key).warn("unknown key, ignored")
         out: dict[str, Any] = {}
         for key, f in self.fields.items():
