@@ -11,7 +11,8 @@ import numpy as np
 
 from .atomic import atomic_output, check_destination
 from .errors import ClothsimError
-from .scene import Scene, load_scene
+from .scene import SIMULATION, Scene, check_memory, load_scene
+from .validate import At, check, integer
 
 
 def add_scene_overrides(p: argparse.ArgumentParser) -> None:
@@ -27,27 +28,25 @@ def add_scene_overrides(p: argparse.ArgumentParser) -> None:
                    help="pick the smallest stable number of substeps per frame and say which")
 
 
+# Flags that set a field of the scene's ``simulation`` object, checked by that field's rule.
+_SIMULATION_FLAGS = (("steps", "--steps", "simulation_steps"), ("fps", "--fps", "frames_per_sec"),
+                     ("seed", "--seed", "seed"))
+
+
 def apply_overrides(scene: Scene, args: argparse.Namespace) -> Scene:
-    """Apply the shared command-line overrides to a loaded scene."""
+    """Apply the shared command-line overrides to a loaded scene (errors name the flag)."""
     changes: dict[str, object] = {}
-    if args.steps is not None:
-        if args.steps < 1:
-            raise ClothsimError(f"--steps: must be >= 1, got {args.steps}")
-        changes["simulation_steps"] = args.steps
-    if args.fps is not None:
-        if not args.fps > 0 or not np.isfinite(args.fps):
-            raise ClothsimError(f"--fps: must be a positive number, got {args.fps}")
-        changes["frames_per_sec"] = args.fps
-    if args.seed is not None:
-        if args.seed < 0:
-            raise ClothsimError(f"--seed: must be >= 0, got {args.seed}")
-        changes["seed"] = args.seed
+    for attr, flag, key in _SIMULATION_FLAGS:
+        value = getattr(args, attr)
+        if value is not None:
+            changes[key] = SIMULATION.check_one(key, value, At(None, flag))
     if args.self_collision is not None:
         changes["self_collision"] = args.self_collision
     if args.integrator is not None:
         changes["integrator"] = args.integrator
     if changes:
         scene = scene.with_simulation(**changes)
+        check_memory(scene)  # another integrator keeps more per point
     return _stability_check(scene, args.auto_substeps)
 
 
@@ -100,8 +99,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     from .sim import Simulation
     from .sim.rest import RestDetector
 
-    if args.frames < 0:
-        raise ClothsimError(f"--frames: must be >= 0, got {args.frames}")
+    check(integer(ge=0), args.frames, "--frames")
     out = Path(args.out)
     if out.suffix != ".npz":
         raise ClothsimError(f"--out: {out}: expected a .npz file name")

@@ -14,15 +14,24 @@ class ClothsimError(Exception):
     exit_code = 2
 
 
-class SceneError(ClothsimError):
+class FieldError(ClothsimError):
+    """A value is invalid: names where it came from (a file, or nothing for a command-line flag or
+    an API setter), the field (``cloth.ks``, ``--steps``) and the problem, on one line."""
+
+    def __init__(self, source: str | Path | None, field: str, problem: str) -> None:
+        self.source = str(source) if source is not None else None
+        self.field = field
+        self.problem = problem
+        where = ": ".join(p for p in (self.source, field) if p)
+        super().__init__(f"{where}: {problem}" if where else problem)
+
+
+class SceneError(FieldError):
     """A scene file is malformed: names the file, the field path and the problem."""
 
     def __init__(self, path: str | Path | None, field: str, problem: str) -> None:
-        self.path = str(path) if path is not None else "<scene>"
-        self.field = field
-        self.problem = problem
-        where = f"{self.path}: {field}" if field else self.path
-        super().__init__(f"{where}: {problem}")
+        super().__init__(str(path) if path is not None else "<scene>", field, problem)
+        self.path: str = self.source or "<scene>"
 
 
 class SimulationBlowUp(ClothsimError):

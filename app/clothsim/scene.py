@@ -11,13 +11,14 @@ from __future__ import annotations
 import json
 import math
 import os
-import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from . import validate as V
 from .errors import ClothsimError, SceneError
 from .resources import data_dir
+from .validate import SceneWarning  # noqa: F401 - warned by the rules, imported from here by users
 
 HORIZONTAL = 0
 VERTICAL = 1
@@ -26,14 +27,14 @@ INTEGRATORS = ("verlet", "symplectic_euler", "implicit_euler", "xpbd")
 DAMPING_MODES = ("spec", "rate")
 SELF_COLLISION_MODES = ("spec", "grid", "off")
 
-# Bytes a simulation needs per grid point: positions, last positions, forces, scratch and
-# mesh buffers (~20 float64 x 3) plus about six springs (two int32 ends, a float64 rest
-# length, an int8 kind) and the hash tables. Measured allocation is below this bound.
-BYTES_PER_POINT = 640
-
-
-class SceneWarning(UserWarning):
-    """A scene loaded, but something in it was ignored (e.g. an unknown key)."""
+# Bytes a run needs per grid point. Measured with tracemalloc (NumPy reports its buffers to it)
+# over Simulation(scene) plus one frame, 64x64 to 512x512 points, every self-collision mode: the
+# Simulation keeps 751.6 B a point; the peak of a frame is 800-816 B with the spec's Verlet and
+# 1336-1380 B with symplectic_euler, implicit_euler and xpbd (their per-run state). Peak RSS of a
+# 724x724 run agreed (787-790 and 726-1299 B). The constants add 25 % for what tracemalloc does
+# not see (Numba's allocations inside kernels) and for the output's copies (.npz, vertex buffers).
+BYTES_PER_POINT = 1024
+BYTES_PER_POINT_OTHER_INTEGRATORS = 1728
 
 
 @dataclass(frozen=True)
@@ -178,52 +179,148 @@ def parse_scene(text: str, path: str = "<scene>") -> Scene:
         raise SceneError(path, "", f"not valid JSON: {exc.msg} at line {exc.lineno} column {exc.colno}") from None
     except RecursionError:
         raise SceneError(path, "", "not valid JSON: nested too deeply") from None
+    except ValueError as exc:  # e.g. an integer of more than 4300 digits
+        raise SceneError(path, "", f"not valid JSON: {exc}") from None
     return scene_from_dict(data, path)
 
 
 def scene_from_dict(data: Any, path: str = "<scene>") -> Scene:
     """Validate an already-parsed JSON value into a :class:`Scene`."""
-    v = _Validator(path)
     if not isinstance(data, dict):
-        raise SceneError(path, "", f"top level must be a JSON object, got {_type_name(data)}")
-    allowed = ("cloth", "sphere", "plane", "simulation", "render")
-    for key in data:
-        if key not in allowed:
-            raise SceneError(path, key, f"unknown top-level object (expected one of: {', '.join(allowed)})")
-    if "cloth" not in data:
-        raise SceneError(path, "cloth", "missing required object")
-    cloth = v.cloth(data["cloth"], "cloth")
-    spheres = tuple(v.each(data.get("sphere"), "sphere", v.sphere))
-    planes = tuple(v.each(data.get("plane"), "plane", v.plane))
-    sim = v.simulation(data["simulation"], "simulation") if "simulation" in data else SimulationSpec()
-    render = None
-    if "render" in data:
-        render = v.obj(data["render"], "render")
-    _check_memory(cloth, path)
-    return Scene(cloth=cloth, spheres=spheres, planes=planes, simulation=sim, render=render, path=path)
+        raise SceneError(path, "", f"top level must be a JSON object, got {V.shown(data)}")
+    values = SCENE(data, V.At(path))
+    cloth = ClothSpec(**values["cloth"])
+    _check_memory(cloth, values["simulation"], path)
+    return Scene(cloth=cloth, spheres=values["spheres"], planes=values["planes"],
+                 simulation=values["simulation"], render=values["render"], path=path)
+
+
+def check_field(section: str, name: str, value: Any) -> Any:
+    """Check one value of the ``cloth`` or ``simulation`` object as the loader does and return it
+    converted (e.g. ``"vertical"`` -> 1); raises :class:`~clothsim.errors.FieldError` naming
+    ``section.name``. The API setters of :class:`~clothsim.sim.Simulation` go through here."""
+    rules = {"cloth": CLOTH, "simulation": SIMULATION}[section]
+    return rules.check_one(name, value, V.At(None, f"{section}.{name}"))
 
 
 # ----------------------------------------------------------------------------------------------
-# Validation
+# The rules of each object (see validate.py)
+
+# Counts that reach the kernels (substeps) or the .npz (seed, as int64) must fit 64 bits; a frame
+# of a million substeps already takes seconds on the smallest grid. Springs hold their ends as
+# int32 point indices, which bounds a side (the memory check bounds the whole grid far sooner).
+MAX_SUBSTEPS = 1_000_000
+MAX_SEED = 2**63 - 1
+MAX_SIDE = 2**31 - 1
+# Physical quantities are bounded far beyond any cloth (the course uses 1 m, 150 kg/m^2, ks 5000,
+# 90 frames/s) so that what the step derives from them stays a finite, non-zero float64 for any
+# combination: the mass per point (1e-28 kg at least), the substep (1e-12 s at least, and its
+# square) and the stable-step estimate (ks / mass). Without the bounds, e.g. ks = 1e308 or
+# frames_per_sec = 1e200 ended the stability check in a ZeroDivisionError.
+MIN_LENGTH, MAX_LENGTH = 1e-6, 1e6
+MIN_DENSITY, MAX_DENSITY = 1e-6, 1e6
+MAX_KS = 1e12
+MIN_FPS, MAX_FPS = 1e-3, 1e6
 
 
-def _type_name(value: Any) -> str:
-    if value is None:
-        return "null"
-    if isinstance(value, bool):
-        return "a boolean"
-    if isinstance(value, (int, float)):
-        return "a number"
-    if isinstance(value, str):
-        return "a string"
-    if isinstance(value, list):
-        return "a list"
-    if isinstance(value, dict):
-        return "an object"
-    return type(value).__name__
+def _pinned(done: dict[str, Any]) -> V.Rule:
+    nw, nh = done["num_width_points"], done["num_height_points"]
+    index = V.integer()
+
+    def pair(value: Any, at: V.At) -> tuple[int, int]:
+        items = V.items_of(value)
+        if items is None or len(items) != 2:
+            raise at.fail(f"expected an [x, y] index pair, got {V.shown(value)}")
+        x, y = index(items[0], at.index(0)), index(items[1], at.index(1))
+        if not 0 <= x < nw:
+            raise at.index(0).fail(f"x index {x} out of range 0..{nw - 1} (num_width_points is {nw})")
+        if not 0 <= y < nh:
+            raise at.index(1).fail(f"y index {y} out of range 0..{nh - 1} (num_height_points is {nh})")
+        return (x, y)
+    return V.list_of(pair, what="[x, y] index pairs")
+
+
+def _unit(v: tuple[float, float, float], at: V.At) -> tuple[float, float, float]:
+    length = math.hypot(*v)
+    return (v[0] / length, v[1] / length, v[2] / length)
+
+
+_FRICTION = V.number(ge=0.0, le=1.0)
+_ORIENTATION = V.choice((), aliases={0: HORIZONTAL, 1: VERTICAL, "horizontal": HORIZONTAL, "vertical": VERTICAL},
+                        expected='0/"horizontal" or 1/"vertical"', fold_case=True)
+
+CLOTH = V.record({
+    "width": V.required(V.number(ge=MIN_LENGTH, le=MAX_LENGTH)),
+    "height": V.required(V.number(ge=MIN_LENGTH, le=MAX_LENGTH)),
+    "num_width_points": V.required(V.integer(ge=2, le=MAX_SIDE)),
+    "num_height_points": V.required(V.integer(ge=2, le=MAX_SIDE)),
+    "thickness": V.required(V.number(gt=0.0)),
+    "orientation": V.required(_ORIENTATION),
+    "pinned": V.Field(depends=_pinned, default=()),
+    "damping": V.required(V.number(ge=0.0, le=100.0)),
+    "density": V.required(V.number(ge=MIN_DENSITY, le=MAX_DENSITY)),
+    "ks": V.required(V.number(ge=0.0, le=MAX_KS)),
+    "enable_structural": V.default(V.boolean, True),
+    "enable_shearing": V.default(V.boolean, True),
+    "enable_bending": V.default(V.boolean, True),
+})
+
+SPHERE = V.record({
+    "origin": V.required(V.vec3()),
+    "radius": V.required(V.number(gt=0.0)),
+    "friction": V.required(_FRICTION),
+})
+
+PLANE = V.record({
+    "point": V.required(V.vec3()),
+    "normal": V.required(V.then(V.vec3(nonzero=True), _unit)),
+    "friction": V.required(_FRICTION),
+})
+
+_SIM_DEFAULTS = SimulationSpec()
+SIMULATION = V.record({
+    "frames_per_sec": V.default(V.number(ge=MIN_FPS, le=MAX_FPS), _SIM_DEFAULTS.frames_per_sec),
+    "simulation_steps": V.default(V.integer(ge=1, le=MAX_SUBSTEPS), _SIM_DEFAULTS.simulation_steps),
+    "gravity": V.default(V.vec3(), _SIM_DEFAULTS.gravity),
+    "self_collision": V.default(
+        V.choice(SELF_COLLISION_MODES, aliases={True: "spec", False: "off"},
+                 expected='true, false, "spec", "grid" or "off"'),
+        _SIM_DEFAULTS.self_collision),
+    "seed": V.default(V.integer(ge=0, le=MAX_SEED), _SIM_DEFAULTS.seed),
+    "integrator": V.default(V.choice(INTEGRATORS), _SIM_DEFAULTS.integrator),
+    "damping_mode": V.default(V.choice(DAMPING_MODES), _SIM_DEFAULTS.damping_mode),
+    "max_stretch": V.default(V.nullable(V.number(ge=0.0)), _SIM_DEFAULTS.max_stretch),
+    "rest_tolerance": V.default(V.number(gt=0.0), _SIM_DEFAULTS.rest_tolerance),
+    "rest_frames": V.default(V.integer(ge=1), _SIM_DEFAULTS.rest_frames),
+})
+
+
+def _simulation(value: Any, at: V.At) -> SimulationSpec:
+    return SimulationSpec(**SIMULATION(value, at))
+
+
+def _render(value: Any, at: V.At) -> dict[str, Any]:
+    # Only its shape here: the renderer checks the contents (render/settings.py), with the same rules.
+    if not isinstance(value, dict):
+        raise at.fail(f"expected an object, got {V.shown(value)}")
+    return value
+
+
+SCENE = V.record({
+    "cloth": V.required(CLOTH),
+    "sphere": V.default(V.one_or_many(V.then(SPHERE, lambda v, at: SphereSpec(**v))), (), dest="spheres"),
+    "plane": V.default(V.one_or_many(V.then(PLANE, lambda v, at: PlaneSpec(**v))), (), dest="planes"),
+    "simulation": V.default(_simulation, _SIM_DEFAULTS, dest="simulation"),
+    "render": V.default(_render, None),
+}, unknown="unknown top-level object (expected one of: cloth, sphere, plane, simulation, render)")
+
+
+# ----------------------------------------------------------------------------------------------
+# Memory
 
 
 def _human_bytes(n: float) -> str:
+    n = float(n)
     for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
         if n < 1024 or unit == "PiB":
             return f"{n:.1f} {unit}" if unit != "B" else f"{int(n)} B"
@@ -231,23 +328,101 @@ def _human_bytes(n: float) -> str:
     return f"{n:.1f} PiB"
 
 
+CGROUP_ROOT = Path("/sys/fs/cgroup")
+# cgroup v1 writes "no limit" as a page-rounded 2^63; anything this large is no limit.
+_NO_LIMIT = 2**60
+
+
+def _read_number(path: Path) -> int | None:
+    try:
+        text = path.read_text(encoding="ascii").strip()
+        return None if text == "max" else int(text)
+    except (OSError, ValueError):
+        return None
+
+
+def _stat_value(path: Path, key: str) -> int:
+    try:
+        with open(path, encoding="ascii") as fh:
+            for line in fh:
+                name, _, value = line.partition(" ")
+                if name == key:
+                    return int(value)
+    except (OSError, ValueError):
+        pass
+    return 0
+
+
+def cgroup_memory_available(root: Path = CGROUP_ROOT, self_cgroup: Path = Path("/proc/self/cgroup")) -> int | None:
+    """Bytes this process's memory cgroup still allows (its limit less its usage, page cache that
+    can be dropped not counted as used), the tightest over the cgroup and its parents; None when
+    no limit is set or none can be read. Reads cgroup v2 (``memory.max``) and v1
+    (``memory/memory.limit_in_bytes``)."""
+    try:
+        lines = self_cgroup.read_text(encoding="ascii").splitlines()
+    except (OSError, UnicodeDecodeError):
+        lines = []
+    own: dict[str, str] = {}
+    for line in lines:
+        _, controllers, rel = line.split(":", 2) if line.count(":") >= 2 else ("", "", "")
+        if controllers == "":
+            own["v2"] = rel
+        elif "memory" in controllers.split(","):
+            own["v1"] = rel
+    layouts = (("v2", root, "memory.max", "memory.current", "inactive_file"),
+               ("v1", root / "memory", "memory.limit_in_bytes", "memory.usage_in_bytes", "total_inactive_file"))
+    best: int | None = None
+    for version, base, limit_file, usage_file, cache_key in layouts:
+        # The process's own cgroup and its parents up to the mount point; inside a container with
+        # its own cgroup namespace the mount point itself is the container's cgroup.
+        rel = Path(own.get(version, "/").lstrip("/"))
+        dirs = [base / rel, *[base / p for p in rel.parents]]
+        for d in dict.fromkeys(dirs):
+            limit = _read_number(d / limit_file)
+            if limit is None or limit >= _NO_LIMIT:
+                continue
+            usage = _read_number(d / usage_file)
+            used = 0 if usage is None else max(0, usage - _stat_value(d / "memory.stat", cache_key))
+            left = max(0, limit - used)
+            best = left if best is None else min(best, left)
+    return best
+
+
 def available_memory() -> int:
-    """Bytes of memory available to a new allocation (MemAvailable, else physical memory)."""
+    """Bytes of memory available to a new allocation: MemAvailable (else physical memory), and no
+    more than the memory cgroup (a container's limit) still allows."""
+    avail = None
     try:
         with open("/proc/meminfo", encoding="ascii") as fh:
             for line in fh:
                 if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
+                    avail = int(line.split()[1]) * 1024
+                    break
+    except (OSError, ValueError):
         pass
-    try:
-        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):
-        return 8 * 1024**3
+    if avail is None:
+        try:
+            avail = int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+        except (ValueError, OSError, AttributeError):
+            avail = 8 * 1024**3
+    limit = cgroup_memory_available()
+    return avail if limit is None else min(avail, limit)
 
 
-def _check_memory(cloth: ClothSpec, path: str) -> None:
-    need = cloth.num_points * BYTES_PER_POINT
+def bytes_per_point(simulation: SimulationSpec) -> int:
+    """Memory a run needs per grid point (see BYTES_PER_POINT): the spec's Verlet keeps no state
+    beyond the Simulation; every other integrator or damping mode keeps its own."""
+    spec_path = simulation.integrator == "verlet" and simulation.damping_mode == "spec"
+    return BYTES_PER_POINT if spec_path else BYTES_PER_POINT_OTHER_INTEGRATORS
+
+
+def check_memory(scene: Scene) -> None:
+    """Refuse (SceneError naming the grid size) a scene whose run would not fit in memory."""
+    _check_memory(scene.cloth, scene.simulation, scene.path)
+
+
+def _check_memory(cloth: ClothSpec, simulation: SimulationSpec, path: str) -> None:
+    need = cloth.num_points * bytes_per_point(simulation)
     avail = available_memory()
     if need > avail:
         raise SceneError(
@@ -256,182 +431,3 @@ def _check_memory(cloth: ClothSpec, path: str) -> None:
             f"a {cloth.num_width_points}x{cloth.num_height_points} grid would need about "
             f"{_human_bytes(need)} of memory; only {_human_bytes(avail)} is available",
         )
-
-
-class _Validator:
-    def __init__(self, path: str) -> None:
-        self.path = path
-
-    def fail(self, field_path: str, problem: str) -> SceneError:
-        return SceneError(self.path, field_path, problem)
-
-    def warn_unknown(self, obj: dict[str, Any], where: str, known: tuple[str, ...]) -> None:
-        for key in obj:
-            if key not in known:
-                warnings.warn(f"{self.path}: {where}.{key}: unknown key, ignored", SceneWarning, stacklevel=4)
-
-    # -- primitive checks --------------------------------------------------------------------
-    def obj(self, value: Any, where: str) -> dict[str, Any]:
-        if not isinstance(value, dict):
-            raise self.fail(where, f"expected an object, got {_type_name(value)}")
-        return value
-
-    def required(self, obj: dict[str, Any], key: str, where: str) -> Any:
-        if key not in obj:
-            raise self.fail(f"{where}.{key}", "missing required field")
-        return obj[key]
-
-    def number(self, value: Any, where: str, *, positive: bool = False, minimum: float | None = None,
-               maximum: float | None = None) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(where, f"expected a number, got {_type_name(value)}")
-        x = float(value)
-        if not math.isfinite(x):
-            raise self.fail(where, f"must be finite, got {value!r}")
-        if positive and x <= 0:
-            raise self.fail(where, f"must be positive, got {value!r}")
-        if minimum is not None and x < minimum:
-            raise self.fail(where, f"must be >= {minimum:g}, got {value!r}")
-        if maximum is not None and x > maximum:
-            raise self.fail(where, f"must be <= {maximum:g}, got {value!r}")
-        return x
-
-    def integer(self, value: Any, where: str, *, minimum: int | None = None) -> int:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(where, f"expected an integer, got {_type_name(value)}")
-        if isinstance(value, float):
-            if not math.isfinite(value):
-                raise self.fail(where, f"must be finite, got {value!r}")
-            if not value.is_integer():
-                raise self.fail(where, f"expected an integer, got {value!r}")
-        n = int(value)
-        if minimum is not None and n < minimum:
-            raise self.fail(where, f"must be >= {minimum}, got {value!r}")
-        return n
-
-    def boolean(self, value: Any, where: str) -> bool:
-        if not isinstance(value, bool):
-            raise self.fail(where, f"expected true or false, got {_type_name(value)}")
-        return value
-
-    def vec3(self, value: Any, where: str) -> tuple[float, float, float]:
-        if not isinstance(value, list):
-            raise self.fail(where, f"expected a list of 3 numbers, got {_type_name(value)}")
-        if len(value) != 3:
-            raise self.fail(where, f"expected 3 numbers, got {len(value)}")
-        x, y, z = (self.number(c, f"{where}[{i}]") for i, c in enumerate(value))
-        return (x, y, z)
-
-    def each(self, value: Any, where: str, parse: Any) -> list[Any]:
-        if value is None:
-            return []
-        if isinstance(value, list):
-            return [parse(item, f"{where}[{i}]") for i, item in enumerate(value)]
-        return [parse(value, where)]
-
-    # -- objects -----------------------------------------------------------------------------
-    def cloth(self, value: Any, where: str) -> ClothSpec:
-        o = self.obj(value, where)
-        known = ("width", "height", "num_width_points", "num_height_points", "thickness", "orientation",
-                 "pinned", "damping", "density", "ks", "enable_structural", "enable_shearing", "enable_bending")
-        self.warn_unknown(o, where, known)
-        width = self.number(self.required(o, "width", where), f"{where}.width", positive=True)
-        height = self.number(self.required(o, "height", where), f"{where}.height", positive=True)
-        nw = self.integer(self.required(o, "num_width_points", where), f"{where}.num_width_points", minimum=2)
-        nh = self.integer(self.required(o, "num_height_points", where), f"{where}.num_height_points", minimum=2)
-        thickness = self.number(self.required(o, "thickness", where), f"{where}.thickness", positive=True)
-        orientation = self.orientation(self.required(o, "orientation", where), f"{where}.orientation")
-        damping = self.number(self.required(o, "damping", where), f"{where}.damping", minimum=0.0, maximum=100.0)
-        density = self.number(self.required(o, "density", where), f"{where}.density", positive=True)
-        ks = self.number(self.required(o, "ks", where), f"{where}.ks", minimum=0.0)
-        pinned = self.pinned(o.get("pinned", []), f"{where}.pinned", nw, nh)
-        flags = {k: self.boolean(o[k], f"{where}.{k}") if k in o else True
-                 for k in ("enable_structural", "enable_shearing", "enable_bending")}
-        return ClothSpec(width=width, height=height, num_width_points=nw, num_height_points=nh,
-                         thickness=thickness, orientation=orientation, damping=damping, density=density,
-                         ks=ks, pinned=pinned, **flags)
-
-    def orientation(self, value: Any, where: str) -> int:
-        if isinstance(value, str):
-            names = {"horizontal": HORIZONTAL, "vertical": VERTICAL}
-            if value.lower() in names:
-                return names[value.lower()]
-            raise self.fail(where, f"unknown orientation {value!r} (expected 0/\"horizontal\" or 1/\"vertical\")")
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or value not in (0, 1):
-            raise self.fail(where, f"unknown orientation {value!r} (expected 0/\"horizontal\" or 1/\"vertical\")")
-        return int(value)
-
-    def pinned(self, value: Any, where: str, nw: int, nh: int) -> tuple[tuple[int, int], ...]:
-        if not isinstance(value, list):
-            raise self.fail(where, f"expected a list of [x, y] index pairs, got {_type_name(value)}")
-        out = []
-        for i, pair in enumerate(value):
-            at = f"{where}[{i}]"
-            if not isinstance(pair, list) or len(pair) != 2:
-                raise self.fail(at, f"expected an [x, y] index pair, got {json.dumps(pair)}")
-            x = self.integer(pair[0], f"{at}[0]")
-            y = self.integer(pair[1], f"{at}[1]")
-            if not 0 <= x < nw:
-                raise self.fail(f"{at}[0]", f"x index {x} out of range 0..{nw - 1} (num_width_points is {nw})")
-            if not 0 <= y < nh:
-                raise self.fail(f"{at}[1]", f"y index {y} out of range 0..{nh - 1} (num_height_points is {nh})")
-            out.append((x, y))
-        return tuple(out)
-
-    def sphere(self, value: Any, where: str) -> SphereSpec:
-        o = self.obj(value, where)
-        self.warn_unknown(o, where, ("origin", "radius", "friction"))
-        origin = self.vec3(self.required(o, "origin", where), f"{where}.origin")
-        radius = self.number(self.required(o, "radius", where), f"{where}.radius", positive=True)
-        friction = self.number(self.required(o, "friction", where), f"{where}.friction", minimum=0.0, maximum=1.0)
-        return SphereSpec(origin=origin, radius=radius, friction=friction)
-
-    def plane(self, value: Any, where: str) -> PlaneSpec:
-        o = self.obj(value, where)
-        self.warn_unknown(o, where, ("point", "normal", "friction"))
-        point = self.vec3(self.required(o, "point", where), f"{where}.point")
-        normal = self.vec3(self.required(o, "normal", where), f"{where}.normal")
-        length = math.sqrt(sum(c * c for c in normal))
-        if not length > 1e-12:
-            raise self.fail(f"{where}.normal", "has zero length")
-        unit = (normal[0] / length, normal[1] / length, normal[2] / length)
-        friction = self.number(self.required(o, "friction", where), f"{where}.friction", minimum=0.0, maximum=1.0)
-        return PlaneSpec(point=point, normal=unit, friction=friction)
-
-    def simulation(self, value: Any, where: str) -> SimulationSpec:
-        o = self.obj(value, where)
-        d = SimulationSpec()
-        known = ("frames_per_sec", "simulation_steps", "gravity", "self_collision", "seed", "integrator",
-                 "damping_mode", "max_stretch", "rest_tolerance", "rest_frames")
-        self.warn_unknown(o, where, known)
-        fps = self.number(o.get("frames_per_sec", d.frames_per_sec), f"{where}.frames_per_sec", positive=True)
-        steps = self.integer(o.get("simulation_steps", d.simulation_steps), f"{where}.simulation_steps", minimum=1)
-        gravity = self.vec3(o["gravity"], f"{where}.gravity") if "gravity" in o else d.gravity
-        self_collision = self.self_collision(o.get("self_collision", True), f"{where}.self_collision")
-        seed = self.integer(o.get("seed", d.seed), f"{where}.seed", minimum=0)
-        integrator = self.choice(o.get("integrator", d.integrator), f"{where}.integrator", INTEGRATORS)
-        damping_mode = self.choice(o.get("damping_mode", d.damping_mode), f"{where}.damping_mode", DAMPING_MODES)
-        max_stretch: float | None = d.max_stretch
-        if "max_stretch" in o:
-            raw = o["max_stretch"]
-            max_stretch = None if raw is None else self.number(raw, f"{where}.max_stretch", minimum=0.0)
-        rest_tol = self.number(o.get("rest_tolerance", d.rest_tolerance), f"{where}.rest_tolerance", positive=True)
-        rest_frames = self.integer(o.get("rest_frames", d.rest_frames), f"{where}.rest_frames", minimum=1)
-        return SimulationSpec(frames_per_sec=fps, simulation_steps=steps, gravity=gravity,
-                              self_collision=self_collision, seed=seed, integrator=integrator,
-                              damping_mode=damping_mode, max_stretch=max_stretch,
-                              rest_tolerance=rest_tol, rest_frames=rest_frames)
-
-    def self_collision(self, value: Any, where: str) -> str:
-        if value is True:
-            return "spec"
-        if value is False:
-            return "off"
-        if isinstance(value, str) and value in ("spec", "grid"):
-            return value
-        raise self.fail(where, f"expected true, false, \"spec\" or \"grid\", got {json.dumps(value)}")
-
-    def choice(self, value: Any, where: str, options: tuple[str, ...]) -> str:
-        if not isinstance(value, str) or value not in options:
-            raise self.fail(where, f"expected one of {', '.join(options)}; got {json.dumps(value)}")
-        return value

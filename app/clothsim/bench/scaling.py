@@ -6,8 +6,9 @@ import argparse
 import statistics
 import time
 
-from ..scene import available_memory, load_scene, BYTES_PER_POINT
+from ..scene import BYTES_PER_POINT, MAX_SUBSTEPS, available_memory, load_scene
 from ..sim import Simulation
+from ..validate import check, integer
 
 
 def add_parser(bench_sub: argparse._SubParsersAction) -> None:
@@ -23,6 +24,10 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Print the table: the pinned4 scene at each size (1 m cloth, spec parameters, thickness
     scaled with the point spacing)."""
+    for n in args.sizes:
+        check(integer(ge=2), n, "--sizes")  # a side of one point has no springs (and no spacing)
+    check(integer(ge=1, le=MAX_SUBSTEPS), args.substeps, "--substeps")
+    check(integer(ge=1), args.repeats, "--repeats")
     base = load_scene("pinned4")
     print(f"{'points':>8}{'self-coll.':>11}{'ms/substep':>12}{'ns/point/substep':>18}{'vs 64x64':>10}")
     ref: dict[str, float] = {}

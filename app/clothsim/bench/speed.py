@@ -9,6 +9,7 @@ import time
 
 from ..scene import bundled_scene_names, load_scene
 from ..sim import Simulation
+from ..validate import check, integer
 from .numpy_baseline import NumpyCloth
 
 
@@ -37,11 +38,14 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print the table."""
+    for flag, value, low in (("--frames", args.frames, 1), ("--repeats", args.repeats, 1),
+                             ("--warmup", args.warmup, 0), ("--baseline-frames", args.baseline_frames, 1)):
+        check(integer(ge=low), value, flag)
     names = args.scenes or bundled_scene_names()
+    scenes = [load_scene(name) for name in names]  # a bad name fails before any timing
     print(f"{'scene':<15}{'self-coll.':>11}{'ms/frame':>10}{'substeps/s':>12}{'x realtime':>11}"
           f"{'numpy ms':>10}{'speedup':>9}")
-    for name in names:
-        scene = load_scene(name)
+    for name, scene in zip(names, scenes):
         for mode in ("off", "spec"):
             sc = scene.with_simulation(self_collision=mode)
             sim = Simulation(sc)

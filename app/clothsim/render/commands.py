@@ -12,6 +12,7 @@ import sys
 import time
 from typing import Any
 
+from .. import validate as V
 from ..errors import ClothsimError
 from .settings import SHADERS, TERMS, RenderSettings, parse_size
 
@@ -168,11 +169,10 @@ def run_render(args: argparse.Namespace) -> int:
     from ..scene import load_scene
 
     fmt = output.check_output(args.output)  # fail on an output we could not write before any work
-    if args.frames < 0:
-        raise ClothsimError(f"--frames: must be >= 0, got {args.frames}")
-    every = args.every if args.every is not None else (1 if fmt == "dir" else 3)
-    if every < 1:
-        raise ClothsimError(f"--every: must be >= 1, got {every}")
+    V.check(V.integer(ge=0), args.frames, "--frames")
+    every = V.check(V.integer(ge=1), args.every, "--every") if args.every is not None else (1 if fmt == "dir" else 3)
+    if args.video_fps is not None:
+        V.check(V.number(gt=0.0), args.video_fps, "--video-fps")
     scene = load_scene(args.scene)
     try:
         from ..commands import apply_overrides
@@ -182,8 +182,6 @@ def run_render(args: argparse.Namespace) -> int:
         scene = apply_overrides(scene, args)
     settings = RenderSettings.from_scene(scene).with_overrides(cli_overrides(args), label=_flag_label)
     fps = args.video_fps if args.video_fps is not None else scene.simulation.frames_per_sec / every
-    if not fps > 0:
-        raise ClothsimError(f"--video-fps: must be positive, got {fps}")
 
     from ..sim.rest import RestDetector
     from ..sim.simulation import Simulation

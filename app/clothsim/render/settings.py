@@ -20,14 +20,12 @@ linearises them before lighting. Texture paths are relative to the scene file.
 
 from __future__ import annotations
 
-import math
-import warnings
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Callable
 
-from ..errors import SceneError
-from ..scene import Scene, SceneWarning
+from .. import validate as V
+from ..scene import Scene
 
 SHADERS: tuple[str, ...] = (
     "wireframe", "normal", "diffuse", "phong", "texture", "bump", "displacement", "mirror", "custom",
@@ -81,17 +79,16 @@ class RenderSettings:
         if scene.render is None:
             return cls()
         base = Path(scene.path).parent if scene.path and not scene.path.startswith("<") else Path(".")
-        values = _RenderValidator(scene.path, base, lambda f: f"render.{f}" if f else "render").parse(scene.render)
-        return replace(cls(), **values)
+        return replace(cls(), **_render_values(scene.render, V.At(scene.path, "render"), base))
 
-    def with_overrides(self, overrides: dict[str, Any], source: str = "command line",
+    def with_overrides(self, overrides: dict[str, Any], source: str | None = None,
                        label: Callable[[str], str] | None = None) -> "RenderSettings":
         """A copy updated from a ``render``-shaped dict (e.g. built from CLI flags).
 
-        Paths are relative to the working directory; errors name ``source`` and ``label(field)``.
+        Paths are relative to the working directory; errors name ``source`` (a file; none for
+        flags) and ``label(field)`` (e.g. ``camera.fov`` -> ``--fov``).
         """
-        values = _RenderValidator(source, Path("."), label or (lambda f: f)).parse(overrides)
-        return replace(self, **values)
+        return replace(self, **_render_values(overrides, V.At(source, "", label), Path(".")))
 
 
 FIELD_NAMES = frozenset(f.name for f in fields(RenderSettings))
@@ -112,175 +109,125 @@ def parse_size(text: str) -> tuple[int, int]:
     return int(parts[0]), int(parts[1])
 
 
-class _RenderValidator:
-    def __init__(self, path: str, base: Path, label: Callable[[str], str]) -> None:
-        self.path = path
-        self.base = base
-        self.label = label
+def _size(value: Any, at: V.At) -> tuple[int, int]:
+    if isinstance(value, str):
+        try:
+            value = list(parse_size(value))
+        except ValueError:
+            raise at.fail(f"expected WIDTHxHEIGHT or [width, height], got {V.shown(value)}") from None
+    items = V.items_of(value)
+    if items is None or len(items) != 2:
+        raise at.fail(f"expected WIDTHxHEIGHT or [width, height], got {V.shown(value)}")
+    side = V.integer(ge=1, le=MAX_SIZE)
+    return (side(items[0], at.index(0)), side(items[1], at.index(1)))
 
-    def fail(self, field: str, problem: str) -> SceneError:
-        return SceneError(self.path, self.label(field), problem)
 
-    # -- primitives ------------------------------------------------------------------------
-    def number(self, v: Any, f: str, lo: float | None = None, hi: float | None = None,
-               lo_open: bool = False) -> float:
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            raise self.fail(f, f"expected a number, got {v!r}")
-        x = float(v)
-        if not math.isfinite(x):
-            raise self.fail(f, f"must be finite, got {v!r}")
-        if lo is not None and (x <= lo if lo_open else x < lo):
-            raise self.fail(f, f"must be {'>' if lo_open else '>='} {lo:g}, got {v!r}")
-        if hi is not None and x > hi:
-            raise self.fail(f, f"must be <= {hi:g}, got {v!r}")
-        return x
+def _power_of_two(n: int, at: V.At) -> int:
+    if n & (n - 1):
+        raise at.fail(f"must be 0 (no multisampling) or a power of two (1, 2, 4, 8, 16), got {n}")
+    return n
 
-    def integer(self, v: Any, f: str, lo: int, hi: int) -> int:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or (isinstance(v, float) and not v.is_integer()):
-            raise self.fail(f, f"expected an integer, got {v!r}")
-        n = int(v)
-        if not lo <= n <= hi:
-            raise self.fail(f, f"must be between {lo} and {hi}, got {n}")
-        return n
 
-    def vec3(self, v: Any, f: str, lo: float | None = None) -> Vec3:
-        if not isinstance(v, (list, tuple)) or len(v) != 3:
-            raise self.fail(f, f"expected a list of 3 numbers, got {v!r}")
-        x, y, z = (self.number(c, f"{f}[{i}]", lo) for i, c in enumerate(v))
-        return (x, y, z)
-
-    def color(self, v: Any, f: str) -> Vec3:
-        if isinstance(v, str):
-            s = v.strip().lstrip("#")
-            if len(s) != 6 or any(ch not in "0123456789abcdefABCDEF" for ch in s):
-                raise self.fail(f, f"expected #rrggbb or [r, g, b] in 0..1, got {v!r}")
-            r, g, b = (int(s[k:k + 2], 16) / 255.0 for k in (0, 2, 4))
-            return (r, g, b)
-        if not isinstance(v, (list, tuple)) or len(v) != 3:
-            raise self.fail(f, f"expected #rrggbb or [r, g, b] in 0..1, got {v!r}")
-        r, g, b = (self.number(c, f"{f}[{i}]", 0.0, 1.0) for i, c in enumerate(v))
+def _colour(value: Any, at: V.At) -> Vec3:
+    if isinstance(value, str):
+        s = value.strip().lstrip("#")
+        if len(s) != 6 or any(ch not in "0123456789abcdefABCDEF" for ch in s):
+            raise at.fail(f"expected #rrggbb or [r, g, b] in 0..1, got {V.shown(value)}")
+        r, g, b = (int(s[k:k + 2], 16) / 255.0 for k in (0, 2, 4))
         return (r, g, b)
+    items = V.items_of(value)
+    if items is None or len(items) != 3:
+        raise at.fail(f"expected #rrggbb or [r, g, b] in 0..1, got {V.shown(value)}")
+    return V.vec3(V.number(ge=0.0, le=1.0))(items, at)
 
-    def obj(self, v: Any, f: str, known: tuple[str, ...]) -> dict[str, Any]:
-        if not isinstance(v, dict):
-            raise self.fail(f, f"expected an object, got {v!r}")
-        for key in v:
-            if key not in known:
-                sub = f"{f}.{key}" if f else key
-                warnings.warn(f"{self.path}: {self.label(sub)}: unknown key, ignored",
-                              SceneWarning, stacklevel=5)
-        return v
 
-    def file(self, v: Any, f: str) -> str:
-        if not isinstance(v, str) or not v:
-            raise self.fail(f, f"expected an image file path, got {v!r}")
-        p = Path(v).expanduser()
-        if not p.is_absolute():
-            p = self.base / p
-        if not p.is_file():
-            raise self.fail(f, f"no such image file: {p}")
+def _terms(value: Any, at: V.At) -> tuple[str, ...]:
+    if isinstance(value, str):
+        value = [t.strip() for t in value.split(",") if t.strip()]
+    chosen = V.list_of(V.choice(TERMS), nonempty=True, what=f"terms from {', '.join(TERMS)}")(value, at)
+    return tuple(t for t in TERMS if t in chosen)
+
+
+def _sphere_resolution(value: Any, at: V.At) -> tuple[int, int]:
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        value = [value, value]
+    items = V.items_of(value)
+    if items is None or len(items) != 2:
+        raise at.fail(f"expected [lat, long] or one integer, got {V.shown(value)}")
+    return (V.integer(ge=2, le=MAX_SPHERE_RESOLUTION)(items[0], at.index(0)),
+            V.integer(ge=3, le=MAX_SPHERE_RESOLUTION)(items[1], at.index(1)))
+
+
+def _image_file(base: Path) -> V.Rule:
+    def check(value: Any, at: V.At) -> str:
+        if not isinstance(value, str) or not value:
+            raise at.fail(f"expected an image file path, got {V.shown(value)}")
+        try:
+            p = Path(value).expanduser()
+            if not p.is_absolute():
+                p = base / p
+            found = p.is_file()
+        except (OSError, ValueError, RuntimeError):  # a NUL byte, a name too long, an unknown ~user
+            found = False
+            p = Path(value)
+        if not found:
+            text = str(p)
+            # a path is quoted in full unless it could break the line or flood it
+            raise at.fail(f"no such image file: {text if text.isprintable() and len(text) <= 300 else V.shown(text)}")
         return str(p)
+    return check
 
-    # -- the object ------------------------------------------------------------------------
-    def parse(self, raw: Any) -> dict[str, Any]:
-        known = ("shader", "size", "samples", "camera", "color", "background", "light", "phong",
-                 "normal_scaling", "height_scaling", "reflectivity", "sphere_resolution", "textures",
-                 "wireframe")
-        o = self.obj(raw, "", known)
-        out: dict[str, Any] = {}
-        if "shader" in o:
-            s = o["shader"]
-            if not isinstance(s, str) or s not in SHADERS:
-                raise self.fail("shader", f"unknown shader {s!r} (expected one of: {', '.join(SHADERS)})")
-            out["shader"] = s
-        if "size" in o:
-            out["size"] = self.size(o["size"], "size")
-        if "samples" in o:
-            n = self.integer(o["samples"], "samples", 0, 16)
-            if n & (n - 1):
-                raise self.fail("samples", f"must be 0 (no multisampling) or a power of two (1, 2, 4, 8, 16), got {n}")
-            out["samples"] = n
-        if "camera" in o:
-            cam = self.obj(o["camera"], "camera", ("position", "target", "fov", "near", "far"))
-            if "position" in cam:
-                out["camera_position"] = self.vec3(cam["position"], "camera.position")
-            if "target" in cam:
-                out["camera_target"] = self.vec3(cam["target"], "camera.target")
-            if "fov" in cam:
-                out["fov"] = self.number(cam["fov"], "camera.fov", 0.0, 179.0, lo_open=True)
-            if "near" in cam:
-                out["near"] = self.number(cam["near"], "camera.near", 0.0, lo_open=True)
-            if "far" in cam:
-                out["far"] = self.number(cam["far"], "camera.far", 0.0, lo_open=True)
-        for key in ("color", "background"):
-            if key in o:
-                out[key] = self.color(o[key], key)
-        if "light" in o:
-            light = self.obj(o["light"], "light", ("position", "intensity"))
-            if "position" in light:
-                out["light_position"] = self.vec3(light["position"], "light.position")
-            if "intensity" in light:
-                out["light_intensity"] = self.vec3(light["intensity"], "light.intensity", 0.0)
-        if "phong" in o:
-            ph = self.obj(o["phong"], "phong", ("k_a", "k_d", "k_s", "p", "I_a", "terms"))
-            for k in ("k_a", "k_d", "k_s"):
-                if k in ph:
-                    out[k] = self.number(ph[k], f"phong.{k}", 0.0)
-            if "p" in ph:
-                out["p"] = self.number(ph["p"], "phong.p", 0.0, lo_open=True)
-            if "I_a" in ph:
-                out["I_a"] = self.vec3(ph["I_a"], "phong.I_a", 0.0)
-            if "terms" in ph:
-                out["terms"] = self.terms(ph["terms"], "phong.terms")
-        for key, hi in (("normal_scaling", None), ("height_scaling", None), ("reflectivity", 1.0)):
-            if key in o:
-                out[key] = self.number(o[key], key, 0.0, hi)
-        if "sphere_resolution" in o:
-            r = o["sphere_resolution"]
-            if isinstance(r, (int, float)) and not isinstance(r, bool):
-                r = [r, r]
-            if not isinstance(r, (list, tuple)) or len(r) != 2:
-                raise self.fail("sphere_resolution", f"expected [lat, long] or one integer, got {r!r}")
-            out["sphere_resolution"] = (
-                self.integer(r[0], "sphere_resolution[0]", 2, MAX_SPHERE_RESOLUTION),
-                self.integer(r[1], "sphere_resolution[1]", 3, MAX_SPHERE_RESOLUTION),
-            )
-        if "textures" in o:
-            tex = self.obj(o["textures"], "textures", ("color", "height", "cubemap"))
-            if "color" in tex:
-                out["color_texture"] = self.file(tex["color"], "textures.color")
-            if "height" in tex:
-                out["height_texture"] = self.file(tex["height"], "textures.height")
-            if "cubemap" in tex:
-                faces = tex["cubemap"]
-                if not isinstance(faces, (list, tuple)) or len(faces) != 6:
-                    raise self.fail("textures.cubemap", "expected a list of 6 image paths (+x, -x, +y, -y, +z, -z)")
-                out["cubemap"] = tuple(self.file(p, f"textures.cubemap[{i}]") for i, p in enumerate(faces))
-        if "wireframe" in o:
-            wf = self.obj(o["wireframe"], "wireframe", ("color_by_family",))
-            if "color_by_family" in wf:
-                v = wf["color_by_family"]
-                if not isinstance(v, bool):
-                    raise self.fail("wireframe.color_by_family", f"expected true or false, got {v!r}")
-                out["color_by_family"] = v
-        return out
 
-    def size(self, v: Any, f: str) -> tuple[int, int]:
-        if isinstance(v, str):
-            try:
-                v = list(parse_size(v))
-            except ValueError:
-                raise self.fail(f, f"expected WIDTHxHEIGHT or [width, height], got {v!r}") from None
-        if not isinstance(v, (list, tuple)) or len(v) != 2:
-            raise self.fail(f, f"expected WIDTHxHEIGHT or [width, height], got {v!r}")
-        return (self.integer(v[0], f"{f}[0]", 1, MAX_SIZE), self.integer(v[1], f"{f}[1]", 1, MAX_SIZE))
+def _render_rules(base: Path) -> V.record:
+    """The ``render`` object's rules; image paths are relative to ``base``. Keys of the nested
+    objects go under the :class:`RenderSettings` field they set (``camera.fov`` -> ``fov``)."""
+    image = _image_file(base)
+    vec, at_least_0 = V.vec3(), V.number(ge=0.0)
+    opt = V.optional
+    return V.record({
+        "shader": opt(V.choice(SHADERS)),
+        "size": opt(_size),
+        "samples": opt(V.then(V.integer(ge=0, le=16), _power_of_two)),
+        "camera": opt(V.record({
+            "position": opt(vec, dest="camera_position"),
+            "target": opt(vec, dest="camera_target"),
+            "fov": opt(V.number(gt=0.0, le=179.0)),
+            "near": opt(V.number(gt=0.0)),
+            "far": opt(V.number(gt=0.0)),
+        })),
+        "color": opt(_colour),
+        "background": opt(_colour),
+        "light": opt(V.record({
+            "position": opt(vec, dest="light_position"),
+            "intensity": opt(V.vec3(at_least_0), dest="light_intensity"),
+        })),
+        "phong": opt(V.record({
+            "k_a": opt(at_least_0),
+            "k_d": opt(at_least_0),
+            "k_s": opt(at_least_0),
+            "p": opt(V.number(gt=0.0)),
+            "I_a": opt(V.vec3(at_least_0)),
+            "terms": opt(_terms),
+        })),
+        "normal_scaling": opt(at_least_0),
+        "height_scaling": opt(at_least_0),
+        "reflectivity": opt(V.number(ge=0.0, le=1.0)),
+        "sphere_resolution": opt(_sphere_resolution),
+        "textures": opt(V.record({
+            "color": opt(image, dest="color_texture"),
+            "height": opt(image, dest="height_texture"),
+            "cubemap": opt(V.list_of(image, length=6, what="image paths (+x, -x, +y, -y, +z, -z)")),
+        })),
+        "wireframe": opt(V.record({"color_by_family": opt(V.boolean)})),
+    })
 
-    def terms(self, v: Any, f: str) -> tuple[str, ...]:
-        if isinstance(v, str):
-            v = [t.strip() for t in v.split(",") if t.strip()]
-        if not isinstance(v, (list, tuple)) or not v:
-            raise self.fail(f, f"expected a non-empty list drawn from {', '.join(TERMS)}")
-        for t in v:
-            if t not in TERMS:
-                raise self.fail(f, f"unknown term {t!r} (expected some of: {', '.join(TERMS)})")
-        return tuple(t for t in TERMS if t in v)
+
+_NESTED = ("camera", "light", "phong", "textures", "wireframe")
+
+
+def _render_values(raw: Any, at: V.At, base: Path) -> dict[str, Any]:
+    """The :class:`RenderSettings` fields that a ``render``-shaped object sets, checked."""
+    values = _render_rules(base)(raw, at)
+    for key in _NESTED:
+        values.update(values.pop(key, {}))
+    return values

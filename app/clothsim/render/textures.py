@@ -124,14 +124,19 @@ def load_image(path: str | Path, *, gray: bool = False, flip: bool = True) -> np
 
     ``flip`` puts the image's bottom row first, so that uv (0, 0) is its lower-left corner.
     """
-    from PIL import Image, UnidentifiedImageError
+    import struct
+
+    from PIL import Image
 
     try:
         with Image.open(path) as im:
             im = im.convert("L" if gray else "RGBA")
             arr = np.asarray(im, dtype=np.uint8)
-    except (OSError, UnidentifiedImageError, ValueError) as exc:
-        raise ClothsimError(f"{path}: cannot read image: {exc}") from None
+    # What Pillow raises for a file it cannot decode: a truncated or malformed file surfaces as any
+    # of these depending on the format, and an image of more than twice MAX_IMAGE_PIXELS (a
+    # "decompression bomb") as DecompressionBombError, which derives from none of them.
+    except (OSError, ValueError, SyntaxError, EOFError, struct.error, Image.DecompressionBombError) as exc:
+        raise ClothsimError(f"{path}: cannot read image: {' '.join(str(exc).split())}") from None
     return np.ascontiguousarray(arr[::-1] if flip else arr)
 
 

@@ -7,7 +7,8 @@ import numpy as np
 from ..cloth import (BENDING, BENDING_STIFFNESS_FACTOR, Springs, all_springs, enabled_mask, grid_positions,
                      pinned_mask, spring_blocks, spring_streams)
 from ..errors import SimulationBlowUp
-from ..scene import Scene
+from ..scene import Scene, check_field
+from ..validate import check, integer
 from . import team
 from .collide import SURFACE_OFFSET
 from .frame import PASS_ALL, member_address, run_substeps
@@ -16,6 +17,7 @@ from .selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, tab
 from .state import ClothState, Colliders, GridHash, SpecHash
 
 _SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID}
+_FRAMES = integer(ge=0)
 #: Rest length given to cut springs: no cloth stretches that far, and its square stays finite.
 CUT_REST = 1e30
 
@@ -73,33 +75,40 @@ class Simulation:
     # ------------------------------------------------------------------------------------------
     # Parameters (re-plan on change)
 
-    def _set_cloth(self, **changes: object) -> None:
-        self.scene = self.scene.with_cloth(**changes)
+    # Every setter checks its value with the scene loader's rule for the same field, so a bad
+    # value raises one FieldError naming it (``cloth.ks: must be >= 0, got nan``) and changes nothing.
+
+    def _set_cloth(self, name: str, value: object) -> None:
+        self.scene = self.scene.with_cloth(**{name: check_field("cloth", name, value)})
         self._replan()
 
-    def _set_sim(self, **changes: object) -> None:
-        self.scene = self.scene.with_simulation(**changes)
+    def _set_sim(self, name: str, value: object) -> None:
+        self.scene = self.scene.with_simulation(**{name: check_field("simulation", name, value)})
         self._replan()
 
-    ks = property(lambda self: self.scene.cloth.ks, lambda self, v: self._set_cloth(ks=float(v)),
-                  doc="Spring constant (N/m); bending springs use 0.2 * ks.")
-    density = property(lambda self: self.scene.cloth.density, lambda self, v: self._set_cloth(density=float(v)),
-                       doc="Area density (kg/m^2); mass per point = width*height*density/N.")
-    damping = property(lambda self: self.scene.cloth.damping, lambda self, v: self._set_cloth(damping=float(v)),
-                       doc="Damping in percent of velocity removed per substep.")
+    ks = property(lambda self: self.scene.cloth.ks, lambda self, v: self._set_cloth("ks", v),
+                  doc="Spring constant (N/m, >= 0); bending springs use 0.2 * ks.")
+    density = property(lambda self: self.scene.cloth.density, lambda self, v: self._set_cloth("density", v),
+                       doc="Area density (kg/m^2, > 0); mass per point = width*height*density/N.")
+    damping = property(lambda self: self.scene.cloth.damping, lambda self, v: self._set_cloth("damping", v),
+                       doc="Damping in percent (0..100) of velocity removed per substep.")
     enable_structural = property(lambda self: self.scene.cloth.enable_structural,
-                                 lambda self, v: self._set_cloth(enable_structural=bool(v)))
+                                 lambda self, v: self._set_cloth("enable_structural", v),
+                                 doc="Structural springs on (True) or off.")
     enable_shearing = property(lambda self: self.scene.cloth.enable_shearing,
-                               lambda self, v: self._set_cloth(enable_shearing=bool(v)))
+                               lambda self, v: self._set_cloth("enable_shearing", v),
+                               doc="Shearing springs on (True) or off.")
     enable_bending = property(lambda self: self.scene.cloth.enable_bending,
-                              lambda self, v: self._set_cloth(enable_bending=bool(v)))
-    gravity = property(lambda self: self.scene.simulation.gravity,
-                       lambda self, v: self._set_sim(gravity=tuple(float(c) for c in v)),
-                       doc="External acceleration (m/s^2).")
+                              lambda self, v: self._set_cloth("enable_bending", v),
+                              doc="Bending springs on (True) or off.")
+    gravity = property(lambda self: self.scene.simulation.gravity, lambda self, v: self._set_sim("gravity", v),
+                       doc="External acceleration (m/s^2), three finite numbers.")
     frames_per_sec = property(lambda self: self.scene.simulation.frames_per_sec,
-                              lambda self, v: self._set_sim(frames_per_sec=float(v)))
+                              lambda self, v: self._set_sim("frames_per_sec", v),
+                              doc="Frames per simulated second (> 0).")
     simulation_steps = property(lambda self: self.scene.simulation.simulation_steps,
-                                lambda self, v: self._set_sim(simulation_steps=int(v)))
+                                lambda self, v: self._set_sim("simulation_steps", v),
+                                doc="Substeps per frame (an integer >= 1).")
 
     @property
     def all_springs(self) -> Springs:
@@ -218,9 +227,10 @@ class Simulation:
         """Advance ``frames`` frames of ``simulation_steps`` substeps each.
 
         Raises :class:`SimulationBlowUp` (state restored to the start of the failing frame) when
-        a position becomes non-finite, naming the frame and the first bad substep.
+        a position becomes non-finite, naming the frame and the first bad substep, and
+        :class:`~clothsim.errors.FieldError` when ``frames`` is not an integer >= 0.
         """
-        for _ in range(int(frames)):
+        for _ in range(check(_FRAMES, frames, "frames")):
             self._advance_frame()
 
     @property
