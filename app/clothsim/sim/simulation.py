@@ -59,7 +59,7 @@ class Simulation:
         # the team's counting sort: busy slots, running cost, points copied in table order, and
         # counts and cursors per member and slot (at most CHUNKS members, see team.team_size)
         self._sort = (np.zeros(m, dtype=np.int64), np.zeros(m, dtype=np.int64), *slot_copies(n),
-                      np.zeros((2, CHUNKS, m), dtype=np.int32), np.zeros((CHUNKS, 2), dtype=np.int64))
+                      np.zeros((2, CHUNKS, spec_table_size(n)), dtype=np.int32), np.zeros((CHUNKS, 2), dtype=np.int64))
         self._boxes = np.zeros((CHUNKS, 6))
         self._skips = np.zeros(1, dtype=np.int64)
         self._pins = np.flatnonzero(self.pinned)
