@@ -172,7 +172,9 @@ def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], 
     ``meanwhile()`` compiles the rest here; the caller then loads it from the cache.
 
     Numba compiles one function at a time per process (a global lock), so a cold start on two
-    cores otherwise leaves one idle. The wait shows as the kernel's own compile (the notice and
+    cores otherwise leaves one idle. (A fork of this process, which skips the 0.7 s import, was
+    slower: 19.7-20.8 s against 16.2-18.0 s for a cold ``simulate``, alternated; copy-on-write
+    faults of two processes both busy in Python, presumably.) The wait shows as the kernel's own compile (the notice and
     ``clothsim bench compile`` see it so). With one core, with ``CLOTHSIM_COMPILE_JOBS=1``, when
     the kernel is cached already, or when the second process fails, nothing is done here and the
     caller's compile happens in this process as usual.
