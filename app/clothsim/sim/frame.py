@@ -23,12 +23,9 @@ from functools import lru_cache
 
 import numba
 import numpy as np
-from llvmlite import ir
 from numba import njit, prange, types
-from numba.core import cgutils
-from numba.extending import intrinsic
 
-from .jit import CHUNKS, KERNEL, PARALLEL
+from .jit import CHUNKS, KERNEL, PARALLEL, call_native, native_address
 
 from .collide import collide_planes, collide_spheres
 from .constraints import provot_band, provot_bands, provot_cut
@@ -277,8 +274,9 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     i0, i1 = query_share(spec.cum, spec.tally, table, r, member, size)
                     if i0 < i1:
                         r0 = share(table, r, size)[0]
-                        repel_slots(pos, spec.movable, spec.dist, spec.sim_steps, spec.start, spec.order, spec.busy,
-                                    spec.xs, spec.ys, spec.zs, spec.ks, r0 + i0, r0 + i1)
+                        call_native(spec.repel, (pos, spec.movable, spec.dist, spec.sim_steps, spec.start, spec.order,
+                                                 spec.busy, spec.xs, spec.ys, spec.zs, spec.ks, np.int64(r0 + i0),
+                                                 np.int64(r0 + i1)))
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
@@ -325,55 +323,39 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 return
 
 
-@intrinsic
-def _call_member(typingctx, address, member, size, steps, st, spec, grid, col, sync, passes):  # noqa: ANN001, ANN201
-    """Call the compiled :func:`_member` at ``address`` (see :func:`member_address`); returns 1 if
-    it failed (an allocation), else 0.
-
-    A call by address keeps the member's code out of the parallel launcher: Numba links every
-    callee into its caller's module and optimises the whole again, so a direct call had the
-    launcher and its parallel region each re-optimise the entire member (9 s of a 24 s cold
-    compile, for a prange body of two calls).
-    """
-    argtys = (member, size, steps, st, spec, grid, col, sync, passes)
-    sig = types.int64(address, *argtys)
-
-    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
-        conv = context.call_conv
-        fnty = conv.get_function_type(types.void, argtys)
-        fn = builder.inttoptr(args[0], fnty.as_pointer())
-        retty = conv.get_return_type(types.void).pointee
-        ret = cgutils.alloca_once(builder, retty)
-        builder.store(cgutils.get_null_value(retty), ret)
-        excinfo = cgutils.alloca_once(builder, fnty.args[1].pointee)
-        packed = list(conv._get_arg_packer(argtys).as_arguments(builder, args[1:]))
-        code = builder.call(fn, [ret, excinfo, *packed])
-        status = conv._get_return_status(builder, code, builder.load(excinfo))
-        return builder.zext(status.is_error, ir.IntType(64))
-
-    return sig, codegen
-
-
 @lru_cache(maxsize=None)
-def _member_address(argtypes: tuple) -> int:
+def _addresses(argtypes: tuple) -> tuple[int, int]:
     from ..compiling import compile_elsewhere, side_kernels
 
+    st, spec = argtypes[3], argtypes[4]
+    i64 = types.int64
+    repel = None
+    if spec != types.none:
+        # repel_slots is called by address too, so that it is compiled here while the member
+        # compiles in the second process, and linked into neither
+        def field(name: str) -> types.Type:
+            return spec.types[spec.fields.index(name)]
+
+        repel = (st.types[st.fields.index("pos")], field("movable"), field("dist"), field("sim_steps"),
+                 *(field(n) for n in ("start", "order", "busy", "xs", "ys", "zs", "ks")), i64, i64)
+
     def meanwhile() -> None:
-        i64 = types.int64
+        if repel is not None:
+            repel_slots.compile(repel)
         run_substeps.compile((i64, *argtypes[3:8], i64, i64, i64))
         side_kernels()
 
     compile_elsewhere(_member, argtypes, meanwhile)
-    _member.compile(argtypes)
-    cres = _member.overloads[argtypes]
-    return cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name)
+    return native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel)
 
 
-def member_address(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None, sync: np.ndarray) -> int:
-    """Address of :func:`_member` compiled for these state groups (compiled, or loaded from the
-    cache, on first use)."""
+def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
+                     sync: np.ndarray) -> tuple[int, int]:
+    """Addresses of :func:`_member` compiled for these state groups and of the
+    :func:`~clothsim.sim.selfcollide.repel_slots` it calls (0 without the spec's hash), compiled or
+    loaded from the cache on first use; the second goes into ``SpecHash.repel``."""
     i64 = types.int64
-    return _member_address((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, sync)), i64))
+    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, sync)), i64))
 
 
 @njit(**PARALLEL)
@@ -388,7 +370,7 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
     ``sync[team.ABORT]`` set means the frame was given up half-way (restore and run it alone).
 
     ``passes`` (PASS_* bits) runs only some passes, for :mod:`clothsim.sim.profile`; ``member``
-    is :func:`member_address` for these groups. ``sync[team.FAILED]`` set after the call means a
+    is the first of :func:`kernel_addresses` for these groups. ``sync[team.FAILED]`` set after the call means a
     member failed (it could not allocate its work space).
     """
     st.skips[0] = 0
@@ -400,7 +382,7 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
             me = 0
             if working == size:
                 me = np.int64(m)
-            if _call_member(member, me, working, steps, st, spec, grid, col, sync, passes) != 0:
+            if call_native(member, (me, working, steps, st, spec, grid, col, sync, passes)) != 0:
                 sync[FAILED] = 1
                 atomic_cas(sync, ABORT, 0, 1)
     return st.skips[0]

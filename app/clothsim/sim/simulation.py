@@ -11,7 +11,7 @@ from ..scene import Scene, check_field
 from ..validate import check, integer
 from . import team
 from .collide import SURFACE_OFFSET
-from .frame import PASS_ALL, member_address, run_substeps
+from .frame import PASS_ALL, kernel_addresses, run_substeps
 from .jit import CHUNKS
 from .selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
 from .state import ClothState, Colliders, GridHash, SpecHash
@@ -205,7 +205,7 @@ class Simulation:
         if self._self_mode == MODE_SPEC:
             busy, cum, xs, ys, zs, ks, counted, tally = self._sort
             spec = SpecHash(self._cell, self._keys, self._slots, self._table, self._order, ~self.pinned, busy, xs, ys,
-                            zs, ks, cum, counted, tally, 2.0 * cloth.thickness, steps)
+                            zs, ks, cum, counted, tally, 2.0 * cloth.thickness, steps, 0)
         elif self._self_mode == MODE_GRID:
             grid = GridHash(self.free, cloth.thickness, steps, self._cell, self._keys, self._slots, self._table,
                             self._order)
@@ -246,7 +246,10 @@ class Simulation:
         """Run ``steps`` substeps of the frame kernel (only the ``passes`` bits) with a team of
         ``size``; False when the team gave the frame up half-way (the state must be restored)."""
         if not self._member_at:
-            self._member_at = member_address(*self._kernel_args, self._sync)
+            self._member_at, repel = kernel_addresses(*self._kernel_args, self._sync)
+            st, spec, grid, col = self._kernel_args
+            if spec is not None:
+                self._kernel_args = (st, spec._replace(repel=repel), grid, col)
         self.colliders_skipped += run_substeps(steps, *self._kernel_args, self._sync, size, passes, self._member_at)
         if self._sync[team.FAILED]:
             raise MemoryError("the frame kernel could not allocate its work space")

@@ -58,6 +58,8 @@ class SpecHash(NamedTuple):
     tally: np.ndarray
     dist: float
     sim_steps: int
+    #: address of the query kernel (see :func:`clothsim.sim.frame.kernel_addresses`); 0 until known
+    repel: int
 
 
 class GridHash(NamedTuple):
