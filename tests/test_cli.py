@@ -161,6 +161,23 @@ def test_profile_lists_passes_and_what_was_skipped(tmp_path):
     assert "colliders" in r.stdout and "self-collision" in r.stdout and "bounding-box" in r.stdout
 
 
+@pytest.mark.parametrize("profile", [[], ["--profile"]], ids=["plain", "profiled"])
+def test_a_blow_up_stops_the_run_with_or_without_profile(tmp_path, profile):
+    # ks 1e7 at one substep a frame is far past the explicit step bound: the guard must end the run
+    # with its one-line error and write nothing, whether the frame runs fused or pass by pass.
+    scene = tmp_path / "stiff.json"
+    scene.write_text(json.dumps({"cloth": dict(GOOD["cloth"], ks=1e7, density=15, orientation=1, pinned=[[0, 0]],
+                                                   num_width_points=20, num_height_points=20),
+                                 "simulation": {"simulation_steps": 1}}))
+    out = tmp_path / "s.npz"
+    r = run_cli("simulate", str(scene), "--frames", "200", *profile, "--out", str(out))
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr
+    errors = [line for line in r.stderr.splitlines() if line.startswith("clothsim: error:")]
+    assert len(errors) == 1 and "blew up" in errors[0], r.stderr
+    assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["stiff.json"]
+
+
 def test_render_of_a_rested_cloth_reuses_its_image(tmp_path):
     out = tmp_path / "rest.gif"
     r = run_cli("render", "pinned4", "--frames", "600", "--every", "30", "--size", "64x64", "--profile",
