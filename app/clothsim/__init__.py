@@ -9,7 +9,7 @@ from .scene import Scene, load_scene
 from .sim import Simulation
 
 __version__ = "0.1.0"
-__all__ = ["ClothsimError", "Renderer", "Scene", "SceneError", "Simulation", "load_scene", "__version__"]
+__all__ = ["ClothsimError", "Renderer", "Scene", "SceneError", "Simulation", "export", "load_scene", "__version__"]
 
 
 def __getattr__(name: str) -> Any:
@@ -18,4 +18,8 @@ def __getattr__(name: str) -> Any:
         from .render.renderer import Renderer
 
         return Renderer
+    if name == "export":  # the function; its package is clothsim.exporters
+        from .exporters.api import export
+
+        return export
     raise AttributeError(name)

@@ -5,7 +5,8 @@ onto the destination at the end (``os.replace``), so a reader sees either the ol
 new one. Only a regular file is ever replaced: a folder, a device, a pipe or a socket at the
 destination is an error, raised before any temporary file exists.
 
-A frames folder (numbered ``frame_NNNNN.png`` files) is written as follows:
+A frames folder (numbered ``frame_NNNNN.png`` files; another folder output, such as an OBJ
+sequence, passes ``owned`` to name the files it writes) is written as follows:
 
 * a folder that does not exist yet is built under a temporary name beside it and renamed
   into place at the end, so it appears complete or not at all;
@@ -34,7 +35,7 @@ import signal
 import stat
 import tempfile
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from .errors import ClothsimError
@@ -71,16 +72,17 @@ def os_errors(label: str, doing: str = "cannot write") -> Iterator[None]:
 
 
 def check_destination(dest: str | os.PathLike[str], *, directory: bool = False,
-                      label: str | None = None) -> None:
+                      label: str | None = None, owned: Callable[[str], bool] = is_frame_name) -> None:
     """Fail fast: raise :class:`ClothsimError` if ``dest`` could not be written.
 
     Runs every check :func:`atomic_output` runs (what is at the destination, the frames-folder
     rule, parents that are files) and also proves that the nearest existing folder on the way
     to the destination is writable, by creating and removing an empty file there. Call it
-    before any long computation whose result would go to ``dest``.
+    before any long computation whose result would go to ``dest``. ``owned`` is as for
+    :func:`atomic_output`.
     """
     label = _label(Path(dest), label)
-    _, home = _inspect(Path(dest), directory, label)
+    _, home = _inspect(Path(dest), directory, label, owned)
     probe_in = _nearest_existing(home)
     with os_errors(label, f"cannot write in {probe_in}"):
         fd, probe = tempfile.mkstemp(prefix=".clothsim-", suffix=".probe", dir=probe_in)
@@ -90,7 +92,7 @@ def check_destination(dest: str | os.PathLike[str], *, directory: bool = False,
 
 @contextlib.contextmanager
 def atomic_output(dest: str | os.PathLike[str], *, directory: bool = False, label: str | None = None,
-                  block_writes: bool = True) -> Iterator[Path]:
+                  block_writes: bool = True, owned: Callable[[str], bool] = is_frame_name) -> Iterator[Path]:
     """Yield a temporary path for ``dest`` (a file, or a frames folder if ``directory``).
 
     If the block succeeds the temporary output is moved onto ``dest`` as the module docstring
@@ -102,9 +104,13 @@ def atomic_output(dest: str | os.PathLike[str], *, directory: bool = False, labe
     ``block_writes`` says the block does nothing but write the temporary output, so an
     ``OSError`` it raises is a write failure and is reported as one line; pass ``False`` when
     the block runs other work too and converts its own write errors.
+
+    ``owned`` tells, for a folder output, the names of the files clothsim writes there (default:
+    ``frame_NNNNN.png``): an existing folder holding anything else is refused, and such files
+    left from an earlier run and not rewritten are deleted at the end.
     """
     label = _label(Path(dest), label)
-    dest, home = _inspect(Path(dest), directory, label)
+    dest, home = _inspect(Path(dest), directory, label, owned)
     created = _make_parents(home, label)
     try:
         with os_errors(label, f"cannot write in {home}"):
@@ -120,7 +126,7 @@ def atomic_output(dest: str | os.PathLike[str], *, directory: bool = False, labe
             yield tmp
         with _no_interrupts(), os_errors(label):
             if directory:
-                _commit_folder(tmp, dest, home)
+                _commit_folder(tmp, dest, home, owned)
             else:
                 _commit_file(tmp, dest)
     except BaseException:
@@ -135,7 +141,8 @@ def _label(dest: Path, label: str | None) -> str:
     return label if label is not None else str(dest)
 
 
-def _inspect(dest: Path, directory: bool, label: str) -> tuple[Path, Path]:
+def _inspect(dest: Path, directory: bool, label: str,
+             owned: Callable[[str], bool] = is_frame_name) -> tuple[Path, Path]:
     """Check what is at ``dest`` and above it.
 
     Returns the path to write (``dest`` with a symbolic link followed) and the folder that will
@@ -156,7 +163,7 @@ def _inspect(dest: Path, directory: bool, label: str) -> tuple[Path, Path]:
         if st is not None and not stat.S_ISDIR(st.st_mode):
             raise ClothsimError(f"{label}: exists and is not a folder (a frames folder needs a folder)")
         if st is not None:
-            _check_folder_is_ours(dest, label)
+            _check_folder_is_ours(dest, label, owned)
             return dest, dest
     elif st is not None:
         if stat.S_ISDIR(st.st_mode):
@@ -204,10 +211,10 @@ def _file_ancestor(path: Path) -> Path:
     return path.parent
 
 
-def _check_folder_is_ours(folder: Path, label: str) -> None:
+def _check_folder_is_ours(folder: Path, label: str, owned: Callable[[str], bool] = is_frame_name) -> None:
     with os_errors(label, "cannot read the folder"):
         with os.scandir(folder) as entries:
-            foreign = sum(1 for e in entries if not (is_frame_name(e.name) and e.is_file(follow_symlinks=False)))
+            foreign = sum(1 for e in entries if not (owned(e.name) and e.is_file(follow_symlinks=False)))
     if foreign:
         files = "file" if foreign == 1 else "files"
         raise ClothsimError(f"{label}: folder is not empty ({foreign} {files} not written by clothsim); "
@@ -256,7 +263,7 @@ def _commit_file(tmp: Path, dest: Path) -> None:
     _fsync_folder(dest.parent)
 
 
-def _commit_folder(tmp: Path, dest: Path, home: Path) -> None:
+def _commit_folder(tmp: Path, dest: Path, home: Path, owned: Callable[[str], bool] = is_frame_name) -> None:
     names = sorted(os.listdir(tmp))
     for name in names:
         _fsync(tmp / name)
@@ -266,7 +273,7 @@ def _commit_folder(tmp: Path, dest: Path, home: Path) -> None:
         new = set(names)
         with os.scandir(dest) as entries:
             stale = [e.name for e in entries
-                     if e.name not in new and is_frame_name(e.name) and e.is_file(follow_symlinks=False)]
+                     if e.name not in new and owned(e.name) and e.is_file(follow_symlinks=False)]
         for name in stale:
             (dest / name).unlink(missing_ok=True)
         os.rmdir(tmp)

@@ -18,6 +18,7 @@ no .json) of a bundled scene: pinned2, pinned4, sphere, plane, selfCollision.
 examples:
   clothsim simulate scenes/sphere.json --frames 180 --out sphere.npz
   clothsim render sphere --shader phong -o sphere.png
+  clothsim export sphere --frames 180 -o sphere.usd   # or -o sphere_obj/ for an OBJ sequence
   clothsim bench speed
   clothsim compile                 # compile every kernel now (images, CI caches, cluster workers)
 """
@@ -48,6 +49,10 @@ def build_parser() -> argparse.ArgumentParser:
     from .commands import add_simulate_parser
 
     add_simulate_parser(sub)
+
+    from .exporters.commands import add_parser as add_export_parser
+
+    add_export_parser(sub)
     bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling",
                            description="Benchmarks that print figures measured on this machine.")
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")

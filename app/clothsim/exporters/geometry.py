@@ -1,0 +1,106 @@
+"""What an exported file holds, independent of the format: the cloth's mesh and the colliders.
+
+The cloth's topology, texture coordinates and per-vertex normals are the renderer's
+(:mod:`clothsim.render.mesh`): the grid's two triangles per quad, u along the x index and v along
+the y index, and area-weighted normals from the same compiled kernel. Nothing here loads OpenGL.
+
+Colliders become :class:`Collider` records. Each kind of collider is one function in
+:data:`COLLIDER_KINDS` that turns a scene into records; a writer handles every record through its
+polygon mesh (world space) and may write a primitive it knows natively instead (a USD sphere).
+Another kind of collider is one more function in that tuple; one that moves would add its
+transforms over time to the record.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..render import mesh as render_mesh
+from ..scene import Scene
+
+#: Rings and segments of a sphere written as polygons (the renderer's default resolution).
+SPHERE_RESOLUTION = (40, 40)
+#: Half the side of the square written for a plane, in metres (the renderer draws the same quad).
+PLANE_HALF_EXTENT = 2.0
+
+
+@dataclass(frozen=True)
+class MeshData:
+    """A polygon mesh whose faces all have the same number of corners.
+
+    ``points`` (V, 3) and ``normals`` (V, 3) float32, ``uvs`` (V, 2) float32, all per vertex;
+    ``faces`` (F, k) int64 indices into them, counter-clockwise seen from the front.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    uvs: np.ndarray
+    faces: np.ndarray
+
+
+@dataclass(frozen=True)
+class Collider:
+    """One collider as exported: a unique ``name`` (``sphere_0``), its polygons, and optionally
+    the parameters of a primitive shape (``sphere``: centre and radius) for formats that have it."""
+
+    name: str
+    mesh: MeshData
+    sphere: tuple[tuple[float, float, float], float] | None = None
+
+
+# -- cloth ---------------------------------------------------------------------------------------
+def cloth_faces(nw: int, nh: int) -> np.ndarray:
+    """The grid's triangles as (T, 3) int64: the renderer's index buffer, three by three."""
+    return render_mesh.cloth_triangles(nw, nh).astype(np.int64).reshape(-1, 3)
+
+
+def cloth_uvs(nw: int, nh: int) -> np.ndarray:
+    """Per-vertex texture coordinates (N, 2) float32, as the renderer uses them."""
+    return render_mesh.cloth_uvs(nw, nh)
+
+
+class ClothNormals:
+    """Per-vertex unit normals of the cloth, computed by the renderer's kernel (area-weighted)."""
+
+    def __init__(self, nw: int, nh: int) -> None:
+        self.nw = nw
+        self.nh = nh
+        self._vertices = np.zeros((nw * nh, render_mesh.CLOTH_FLOATS), dtype=np.float32)
+
+    def __call__(self, positions: np.ndarray) -> np.ndarray:
+        """Normals (N, 3) float32 for positions (N, 3): a new array."""
+        render_mesh.update_cloth_vertices(np.ascontiguousarray(positions, dtype=np.float64),
+                                          self.nw, self.nh, False, self._vertices)
+        return self._vertices[:, 3:6].copy()
+
+
+# -- colliders -----------------------------------------------------------------------------------
+def _spheres(scene: Scene) -> Iterator[Collider]:
+    verts, idx = render_mesh.sphere_mesh(*SPHERE_RESOLUTION)  # a unit sphere
+    for k, sphere in enumerate(scene.spheres):
+        centre = np.asarray(sphere.origin, dtype=np.float64)
+        points = (verts[:, 0:3].astype(np.float64) * sphere.radius + centre).astype(np.float32)
+        mesh = MeshData(points=points, normals=np.ascontiguousarray(verts[:, 3:6]),
+                        uvs=np.ascontiguousarray(verts[:, 9:11]), faces=idx.astype(np.int64).reshape(-1, 3))
+        yield Collider(f"sphere_{k}", mesh, sphere=(tuple(float(c) for c in sphere.origin), float(sphere.radius)))
+
+
+def _planes(scene: Scene) -> Iterator[Collider]:
+    for k, plane in enumerate(scene.planes):
+        verts, _ = render_mesh.plane_mesh(plane.point, plane.normal, half_extent=PLANE_HALF_EXTENT)
+        # plane_mesh's corners go round the square counter-clockwise seen from the normal's side.
+        mesh = MeshData(points=np.ascontiguousarray(verts[:, 0:3]), normals=np.ascontiguousarray(verts[:, 3:6]),
+                        uvs=np.ascontiguousarray(verts[:, 9:11]), faces=np.array([[0, 1, 2, 3]], dtype=np.int64))
+        yield Collider(f"plane_{k}", mesh)
+
+
+#: One function per kind of collider, in the order they are written.
+COLLIDER_KINDS: tuple[Callable[[Scene], Iterator[Collider]], ...] = (_spheres, _planes)
+
+
+def colliders(scene: Scene) -> list[Collider]:
+    """Every collider of ``scene``, kind by kind."""
+    return [c for kind in COLLIDER_KINDS for c in kind(scene)]

@@ -1,0 +1,86 @@
+"""An OBJ sequence: one ``cloth_NNNNN.obj`` per exported frame and ``colliders.obj``.
+
+Every file holds ``v``, ``vt``, ``vn`` and ``f v/vt/vn`` lines (1-based indices; one texture
+coordinate and one normal per vertex, so the three indices are equal). Coordinates are the
+float32 values written with 9 significant digits, which parse back to exactly the same float32.
+The text is built with one string format over whole arrays (no loop per point), and holds no
+date or path, so the same scene and seed give the same bytes.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from .. import __version__
+from .geometry import Collider, MeshData
+
+COLLIDERS_NAME = "colliders.obj"
+_CLOTH = re.compile(r"cloth_(\d{5,})\.obj")
+
+
+def cloth_name(frame: int) -> str:
+    """The file name of the cloth at ``frame``: ``cloth_00012.obj``."""
+    return f"cloth_{frame:05d}.obj"
+
+
+def is_sequence_name(name: str) -> bool:
+    """True for exactly the names an OBJ sequence is made of (:func:`cloth_name`, colliders.obj)."""
+    if name == COLLIDERS_NAME:
+        return True
+    m = _CLOTH.fullmatch(name)
+    return m is not None and name == cloth_name(int(m[1]))
+
+
+def _rows(prefix: str, values: np.ndarray) -> str:
+    """``PREFIX a b c`` lines for a (n, k) float32 array, each value in round-trip precision."""
+    values = np.asarray(values, dtype=np.float32)
+    n, k = values.shape
+    line = prefix + " %.9g" * k + "\n"
+    return (line * n) % tuple(values.astype(np.float64).ravel().tolist())
+
+
+def _faces(faces: np.ndarray, offset: int) -> str:
+    """``f a/a/a b/b/b c/c/c`` lines (1-based, shifted by ``offset`` vertices)."""
+    n, k = faces.shape
+    line = "f" + " %d/%d/%d" * k + "\n"
+    idx = np.repeat(faces.astype(np.int64) + offset + 1, 3, axis=1)
+    return (line * n) % tuple(idx.ravel().tolist())
+
+
+class ObjSequenceWriter:
+    """Writes the sequence into ``folder`` (the temporary folder of an atomic output)."""
+
+    def __init__(self, folder: Path, nw: int, nh: int, uvs: np.ndarray, faces: np.ndarray,
+                 colliders: list[Collider]) -> None:
+        self.folder = Path(folder)
+        self.nw = nw
+        self.nh = nh
+        # The same in every frame: formatted once.
+        self._uv_text = _rows("vt", uvs)
+        self._face_text = "s off\n" + _faces(faces, 0)
+        self._colliders = colliders
+
+    def frame(self, frame: int, points: np.ndarray, normals: np.ndarray) -> None:
+        """Write the cloth at ``frame``: positions and normals (N, 3), float32."""
+        text = "".join((f"# clothsim {__version__}: cloth at frame {frame} ({self.nw} x {self.nh} points)\n",
+                        "o cloth\n", _rows("v", points), self._uv_text, _rows("vn", normals), self._face_text))
+        (self.folder / cloth_name(frame)).write_text(text, encoding="ascii", newline="\n")
+
+    def finish(self, start: int, end: int, fps: float) -> None:
+        """Write ``colliders.obj`` when the scene has colliders (they do not move)."""
+        if not self._colliders:
+            return
+        parts = [f"# clothsim {__version__}: static colliders\n"]
+        offset = 0
+        for collider in self._colliders:
+            parts.append(_mesh_text(collider.name, collider.mesh, offset))
+            offset += len(collider.mesh.points)
+        (self.folder / COLLIDERS_NAME).write_text("".join(parts), encoding="ascii", newline="\n")
+
+
+def _mesh_text(name: str, mesh: MeshData, offset: int) -> str:
+    return (f"o {name}\n" + _rows("v", mesh.points) + _rows("vt", mesh.uvs) + _rows("vn", mesh.normals)
+            + "s off\n" + _faces(mesh.faces, offset))
