@@ -100,3 +100,39 @@ def test_bench_compile_rejects_an_unknown_command() -> None:
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == [
         "clothsim: error: --commands: unknown command 'nope' (expected some of: simulate, render, sphere, grid, xpbd)"]
+
+_CACHE_PROBE = """
+import numpy as np
+from clothsim.sim.rest import max_displacement
+max_displacement(np.zeros((3, 4)), np.zeros((3, 4)))
+s = max_displacement.stats
+print(sum(s.cache_hits.values()), sum(s.cache_misses.values()))
+"""
+
+
+def test_a_change_to_any_kernel_module_makes_every_cached_kernel_stale(tmp_path: Path) -> None:
+    # Numba alone keys a cache on the kernel's own file; a kernel compiled against another module's
+    # old code (after an upgrade) was loaded and ran it, or crashed. Here the rest detector must be
+    # recompiled when collide.py, which it does not even call, changes, and loaded when nothing did.
+    site = tmp_path / "site"
+    shutil.copytree(REPO / "app" / "clothsim", site / "clothsim",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "PYTHONPATH")}
+    env["PYTHONPATH"] = str(site)
+
+    def hits_and_misses() -> tuple[int, int]:
+        done = subprocess.run([sys.executable, "-c", _CACHE_PROBE], capture_output=True, text=True, env=env,
+                              cwd=tmp_path, timeout=300)
+        assert done.returncode == 0, done.stderr
+        hits, misses = done.stdout.split()
+        return int(hits), int(misses)
+
+    assert hits_and_misses() == (0, 1)  # compiled, into the copy's __pycache__
+    assert hits_and_misses() == (1, 0)  # loaded
+    collide = site / "clothsim" / "sim" / "collide.py"
+    collide.write_text(collide.read_text() + "\n# changed\n")
+    assert hits_and_misses() == (0, 1)  # stale: compiled again
+    assert hits_and_misses() == (1, 0)
+    notes = site / "clothsim" / "README.txt"  # a file without kernels changes nothing
+    notes.write_text("x")
+    assert hits_and_misses() == (1, 0)

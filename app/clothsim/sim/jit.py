@@ -15,6 +15,11 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from .kernel_cache import install as _install_package_stamp
+
+# Before any kernel is decorated: every module that defines one imports this one first.
+_install_package_stamp()
+
 # Numba runs PARALLEL kernels on libgomp, whose idle workers spin 300,000 pause instructions
 # (about 10 ms on this machine's CPUs) before sleeping. A frame's parallel regions follow each
 # other microseconds apart, so a short spin keeps the same speed, while the default stole both
