@@ -19,6 +19,7 @@ examples:
   clothsim simulate scenes/sphere.json --frames 180 --out sphere.npz
   clothsim render sphere --shader phong -o sphere.png
   clothsim export sphere --frames 180 -o sphere.usd   # or -o sphere_obj/ for an OBJ sequence
+  clothsim sweep selfCollision --set cloth.density=1,15,1000 --set cloth.ks=10,5000,200000 -o sheet.png
   clothsim bench speed
   clothsim compile                 # compile every kernel now (images, CI caches, cluster workers)
 """
@@ -53,6 +54,10 @@ def build_parser() -> argparse.ArgumentParser:
     from .exporters.commands import add_parser as add_export_parser
 
     add_export_parser(sub)
+
+    from .sweeps.commands import add_parser as add_sweep_parser
+
+    add_sweep_parser(sub)
     bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling",
                            description="Benchmarks that print figures measured on this machine.")
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
