@@ -23,7 +23,7 @@ GAP = 6  # pixels between cells
 PAD = 8  # around labels and the sheet
 BACKGROUND = (255, 255, 255)
 INK = (20, 20, 20)
-FAILED = (200, 200, 200)
+FAILED = (244, 214, 214)  # a failed run: pale red, unlike any floor or sky
 
 
 @dataclass(frozen=True)
@@ -142,7 +142,7 @@ def layout(spec: SheetSpec, cell: tuple[int, int]) -> Layout:
 
 
 def compose(spec: SheetSpec, images: dict[tuple[str, int], np.ndarray | None], cell: tuple[int, int]) -> np.ndarray:
-    """The sheet as an (H, W, 3) uint8 image; a missing image (a failed run) is a grey cell."""
+    """The sheet as an (H, W, 3) uint8 image; a missing image (a failed run) is a pale red cell."""
     from PIL import Image, ImageDraw
 
     geo = layout(spec, cell)
