@@ -316,6 +316,12 @@ def test_killed_worker_then_resume_completes(tmp_path: Path, scene_file: Path) -
 
 
 # -- API and Dask --------------------------------------------------------------------------------
+def test_sweep_is_the_function_even_after_its_package_loads() -> None:
+    import clothsim.sweeps.api  # noqa: F401
+
+    assert "sweep" in clothsim.__all__ and callable(clothsim.sweep)
+
+
 def test_api_and_local_dask_cluster_give_identical_arrays(tmp_path: Path, scene_file: Path) -> None:
     distributed = pytest.importorskip("distributed")
     grid = {"cloth.ks": [2000, 5000], "cloth.damping": "0.1,0.3"}

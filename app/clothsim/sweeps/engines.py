@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import os
+import signal
 from collections.abc import Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 
@@ -31,6 +32,9 @@ def default_workers() -> int:
 
 
 def _init_worker() -> None:
+    # Ctrl-C reaches the whole process group: the command handles it (and stops the workers),
+    # a worker must not print its own traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     # One Numba thread per worker process: the processes are the parallelism. Results are
     # bit-identical for any thread count, so this changes the speed only.
     import numba
@@ -45,6 +49,27 @@ def import_distributed(label: str = "--scheduler") -> object:
     except ImportError:
         raise ClothsimError(f"{label}: needs dask.distributed, which is not installed: {CLUSTER_HINT}") from None
     return distributed
+
+
+def _start_workers(executor: ProcessPoolExecutor, count: int) -> None:
+    """Start every worker now, with Ctrl-C ignored from their first instruction.
+
+    The pool starts a process per submitted task until it has ``count``; a process started while
+    SIGINT is ignored inherits that (across exec), so a Ctrl-C during its start-up cannot print a
+    traceback from inside multiprocessing. The command's own handler is back right after.
+    """
+    import threading
+
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.getsignal(signal.SIGINT) if main else None
+    if main and previous is not None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        for _ in range(count):
+            executor.submit(os.getpid)
+    finally:
+        if main and previous is not None:
+            signal.signal(signal.SIGINT, previous)
 
 
 @contextlib.contextmanager
@@ -66,9 +91,16 @@ def open_executor(workers: int | None = None, scheduler: str | None = None) -> I
     # spawn, not fork: a parent that ran Numba's parallel kernels (the bench's plain loop, a
     # notebook) holds a threading layer that is not safe to fork.
     context = multiprocessing.get_context("spawn")
-    executor = ProcessPoolExecutor(max_workers=workers or default_workers(), mp_context=context,
-                                   initializer=_init_worker)
+    count = workers or default_workers()
+    executor = ProcessPoolExecutor(max_workers=count, mp_context=context, initializer=_init_worker)
     try:
+        _start_workers(executor, count)
         yield executor
-    finally:
-        executor.shutdown(wait=True, cancel_futures=True)
+    except BaseException:
+        # Interrupted or failed: stop the workers now rather than wait for their runs to end.
+        for process in list((getattr(executor, "_processes", None) or {}).values()):
+            with contextlib.suppress(Exception):
+                process.kill()
+        executor.shutdown(wait=False, cancel_futures=True)
+        raise
+    executor.shutdown(wait=True)
