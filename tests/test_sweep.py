@@ -248,6 +248,24 @@ def test_resume_redoes_only_missing_or_broken_runs(tmp_path: Path, scene_file: P
     assert snapshot(runs) == after
 
 
+def test_video_per_run_and_a_missing_video_is_redone(tmp_path: Path, scene_file: Path) -> None:
+    import imageio_ffmpeg
+
+    out = tmp_path / "data"
+    args = ["sweep", str(scene_file), "--set", "cloth.ks=2000,5000", "--frames", "6", "--every", "3", "--video",
+            "--size", "64x48", "--workers", "1", "-o", str(out)]
+    assert run_cli(*args).returncode == 0
+    reader = imageio_ffmpeg.read_frames(str(out / "runs" / "run_00001.mp4"))
+    meta = next(reader)
+    assert meta["size"] == (64, 48) and sum(1 for _ in reader) == 3  # frames 0, 3, 6
+    (out / "runs" / "run_00001.mp4").unlink()
+    kept = snapshot(out / "runs")
+    r = run_cli(*args)
+    assert r.returncode == 0 and "1 done, 0 failed, 1 skipped" in r.stderr
+    assert (out / "runs" / "run_00001.mp4").stat().st_size > 0
+    assert snapshot(out / "runs")["run_00000.mp4"] == kept["run_00000.mp4"]
+
+
 def test_same_folder_other_sweep_or_foreign_files_refused(tmp_path: Path, scene_file: Path) -> None:
     out = tmp_path / "data"
     assert run_cli("sweep", str(scene_file), "--set", "cloth.ks=2000", "--frames", "2", "--workers", "1",
@@ -285,7 +303,7 @@ def test_killed_worker_then_resume_completes(tmp_path: Path, scene_file: Path) -
     path = tmp_path / "big.json"
     path.write_text(json.dumps(big))
     args = ["-m", "clothsim", "sweep", str(path), "--set", "cloth.ks=3000,4000,5000,6000,7000,8000",
-            "--frames", "60", "--workers", "1", "-o", str(out)]
+            "--frames", "600", "--workers", "1", "-o", str(out)]
     proc = subprocess.Popen([sys.executable, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         deadline = time.monotonic() + 120
@@ -311,7 +329,7 @@ def test_killed_worker_then_resume_completes(tmp_path: Path, scene_file: Path) -
     assert f"{6 - len(done_before)} done, 0 failed, {len(done_before)} skipped" in r.stderr
     for i in range(6):
         with np.load(out / "runs" / f"run_{i:05d}.npz") as data:
-            assert data["positions"].shape == (61, 24 * 24, 3)
+            assert data["positions"].shape == (601, 24 * 24, 3)
     assert not [p for p in out.rglob("*") if ".tmp" in p.name]
 
 
