@@ -340,6 +340,18 @@ def test_sweep_is_the_function_even_after_its_package_loads() -> None:
     assert "sweep" in clothsim.__all__ and callable(clothsim.sweep)
 
 
+def test_unreachable_scheduler_writes_nothing(tmp_path: Path, scene_file: Path, monkeypatch) -> None:
+    distributed = pytest.importorskip("distributed")
+
+    def refuse(*args, **kwargs):
+        raise OSError("Timed out trying to connect to tcp://10.0.0.1:8786 after 20 s")
+
+    monkeypatch.setattr(distributed, "Client", refuse)
+    with pytest.raises(ClothsimError, match="--scheduler tcp://10.0.0.1:8786: cannot connect: Timed out"):
+        clothsim.sweep(scene_file, {"cloth.ks": [10]}, tmp_path / "d", frames=1, scheduler="tcp://10.0.0.1:8786")
+    assert not (tmp_path / "d").exists()
+
+
 def test_api_and_local_dask_cluster_give_identical_arrays(tmp_path: Path, scene_file: Path) -> None:
     distributed = pytest.importorskip("distributed")
     grid = {"cloth.ks": [2000, 5000], "cloth.damping": "0.1,0.3"}

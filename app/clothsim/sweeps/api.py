@@ -133,7 +133,7 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
         if draws:
             try:
                 settings[run.id] = RenderSettings.from_scene(sc).with_overrides(
-                    overrides, label=lambda f: {"shader": "--shader", "size": "--size"}.get(f, f))
+                    overrides, label=lambda f: {"shader": "--shader", "size": "--size"}.get(f.split("[")[0], f))
             except ClothsimError as exc:
                 raise ClothsimError(f"{exc}{label}") from None
     last = max(frame_list)
@@ -164,8 +164,6 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
     records: dict[str, dict[str, Any]] = {rid: {**rec, "skipped": True} for rid, rec in finished.items()}
     images: dict[tuple[str, int], np.ndarray | None] = {}
     lost = 0
-    if data is not None and tasks:
-        data.start()
 
     def finish(result: dict[str, Any]) -> None:
         run = by_id[result["id"]]
@@ -200,6 +198,8 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
         n = min(workers or _workers_default(), len(tasks)) if scheduler is None else None
         try:
             with open_executor(n, scheduler) as executor:
+                if data is not None:
+                    data.start()  # once the workers are there: a cluster that cannot be reached writes nothing
                 futures = {executor.submit(run_one, t): t for t in tasks}
                 for future in concurrent.futures.as_completed(futures):
                     task = futures[future]
