@@ -202,7 +202,7 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
                     data.start()  # once the workers are there: a cluster that cannot be reached writes nothing
                 futures = {executor.submit(run_one, t): t for t in tasks}
                 for future in concurrent.futures.as_completed(futures):
-                    task = futures[future]
+                    task = futures.pop(future)  # drop the result with it once written: memory stays flat
                     try:
                         result = future.result()
                     except concurrent.futures.process.BrokenProcessPool:
