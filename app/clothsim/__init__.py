@@ -9,7 +9,7 @@ from .scene import Scene, load_scene
 from .sim import Simulation
 
 __version__ = "0.1.0"
-__all__ = ["ClothsimError", "Renderer", "Scene", "SceneError", "Simulation", "export", "load_scene", "__version__"]
+__all__ = ["ClothsimError", "Renderer", "Scene", "SceneError", "Simulation", "export", "load_scene", "sweep", "__version__"]
 
 
 def __getattr__(name: str) -> Any:
@@ -22,4 +22,8 @@ def __getattr__(name: str) -> Any:
         from .exporters.api import export
 
         return export
+    if name == "sweep":  # the function; its package is clothsim.sweeps
+        from .sweeps.api import sweep
+
+        return sweep
     raise AttributeError(name)

@@ -19,6 +19,7 @@ examples:
   clothsim simulate scenes/sphere.json --frames 180 --out sphere.npz
   clothsim render sphere --shader phong -o sphere.png
   clothsim export sphere --frames 180 -o sphere.usd   # or -o sphere_obj/ for an OBJ sequence
+  clothsim sweep selfCollision --set cloth.density=1,15,1000 --set cloth.ks=10,5000,200000 -o sheet.png
   clothsim bench speed
   clothsim compile                 # compile every kernel now (images, CI caches, cluster workers)
 """
@@ -53,7 +54,11 @@ def build_parser() -> argparse.ArgumentParser:
     from .exporters.commands import add_parser as add_export_parser
 
     add_export_parser(sub)
-    bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling",
+
+    from .sweeps.commands import add_parser as add_sweep_parser
+
+    add_sweep_parser(sub)
+    bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling, sweep",
                            description="Benchmarks that print figures measured on this machine.")
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
     bench.set_defaults(func=lambda args: (bench.print_help(), 2)[1])
@@ -61,11 +66,12 @@ def build_parser() -> argparse.ArgumentParser:
     from . import compiling
     from .bench import accuracy, scaling, speed, stability
     from .bench import compile as bench_compile
+    from .bench import sweep as bench_sweep
     from .render.commands import add_parsers as add_render_parsers
 
     speed.add_parser(bench_sub)
     add_render_parsers(sub, bench_sub)
-    for module in (accuracy, stability, scaling, bench_compile):
+    for module in (accuracy, stability, scaling, bench_compile, bench_sweep):
         module.add_parser(bench_sub)
     compiling.add_parser(sub)
     return parser

@@ -1,0 +1,265 @@
+"""`clothsim.sweep`: many runs of one scene with parameters varied, into a contact sheet or a dataset.
+
+Every run's scene is built and validated before any run starts (a bad field or value is one
+:class:`~clothsim.ClothsimError` line and nothing is written). Runs execute through one
+``concurrent.futures`` executor (local processes or a Dask cluster, :mod:`.engines`); results
+come back to this process, which writes every file through :mod:`clothsim.atomic`.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import json
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..atomic import atomic_output, check_destination
+from ..errors import ClothsimError
+from ..scene import Scene, load_scene, resolve_scene_path
+from ..validate import check, integer
+from . import dataset as ds
+from . import params as P
+from . import sheet as S
+from .runner import Task, sample_frames
+
+__all__ = ["sweep"]
+
+DEFAULT_SIZE = (256, 256)
+
+
+def _frames_list(frames: Any) -> list[int]:
+    if isinstance(frames, str):
+        try:
+            items = [int(x) for x in frames.split(",")]
+        except ValueError:
+            raise ClothsimError(f"--frames: expected a count or a comma-separated list of frames, got {frames!r}") from None
+    elif isinstance(frames, (list, tuple)):
+        items = list(frames)
+    else:
+        items = [frames]
+    if not items:
+        raise ClothsimError("--frames: no frames")
+    return [check(integer(ge=0), f, "--frames") for f in items]
+
+
+def _base_scene(scene: Any) -> tuple[dict[str, Any], str]:
+    """The base scene's JSON and the path errors name (a file, a bundled name, a dict or a Scene)."""
+    if isinstance(scene, Scene):
+        return P.scene_json(scene), scene.path
+    if isinstance(scene, dict):
+        return json.loads(json.dumps(scene)), "<scene>"
+    load_scene(scene)  # the file's own errors first, exactly as simulate reports them
+    path = resolve_scene_path(scene)
+    return json.loads(path.read_text(encoding="utf-8")), str(path)
+
+
+def _output_kind(out: str | os.PathLike[str]) -> str:
+    text = os.fspath(out)
+    if not text:
+        raise ClothsimError("-o: output path is empty")
+    p = Path(text)
+    if p.suffix.lower() == ".png" and not text.endswith(("/", os.sep)):
+        if p.is_dir():
+            raise ClothsimError(f"{text}: is a folder, not a file; choose a file name")
+        return "sheet"
+    if text.endswith(("/", os.sep)) or not p.suffix or p.is_dir():
+        return "dataset"
+    raise ClothsimError(f"{text}: unsupported output type {p.suffix!r} "
+                        "(use .png for a contact sheet, or a folder for a dataset)")
+
+
+def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[str], *,
+          frames: int | list[int] = 90, every: int = 1, samples: int | None = None, seed: int | None = None,
+          shader: str | None = None, size: tuple[int, int] | str | None = None, workers: int | None = None,
+          scheduler: str | None = None, video: bool = False, progress: bool = False,
+          report: bool = False) -> list[dict[str, Any]]:
+    """Run ``scene`` once per parameter set and write ``out``; return one record per run.
+
+    ``grid_or_samples`` maps dotted field paths to values: ``{"cloth.ks": [10, 5000],
+    "cloth.density": "1,15,1000"}``. Without ``samples`` the runs are the full grid (cartesian
+    product, last field fastest); with ``samples=N, seed=S`` N runs are drawn, and a field's
+    values may also be ``"uniform:A:B"`` / ``"loguniform:A:B"``. ``out`` ending in ``.png`` is a
+    contact sheet of each run's last frame (``frames`` may then be a list: one cell per frame)
+    drawn at ``size`` as ``clothsim render`` draws it; a folder is a dataset (``manifest.jsonl``,
+    ``runs/<id>.npz`` with positions sampled every ``every`` frames; ``video`` adds an mp4).
+    Runs execute in ``workers`` local processes (default: one per core) or on the Dask cluster
+    at ``scheduler``. Records have ``id``, ``params``, ``seed``, ``status`` (``done``/``failed``),
+    ``error``, ``path``, ``frames``, ``seconds``, and ``skipped`` (True when an earlier sweep into
+    the same dataset had finished the run).
+    """
+    from ..render.settings import RenderSettings, parse_size
+
+    start = time.perf_counter()
+    kind = _output_kind(out)
+    frame_list = _frames_list(frames)
+    every = check(integer(ge=1), every, "--every")
+    if kind == "dataset" and len(frame_list) > 1:
+        raise ClothsimError("--frames: a list of frames is for a contact sheet (.png); a dataset takes one count")
+    if kind == "sheet" and video:
+        raise ClothsimError("--video: needs a dataset folder as OUT, not a .png")
+    if samples is not None:
+        samples = check(integer(ge=1), samples, "--samples")
+        seed = check(integer(ge=0, le=2**63 - 1), seed, "--seed") if seed is not None else None
+    elif seed is not None:
+        raise ClothsimError("--seed: goes with --samples N (a grid draws nothing)")
+    if workers is not None:
+        workers = check(integer(ge=1), workers, "--workers")
+    if isinstance(size, str):
+        try:
+            size = parse_size(size)
+        except ValueError as exc:
+            raise ClothsimError(f"--size: {exc}") from None
+    cell_size = tuple(size) if size is not None else DEFAULT_SIZE
+    if not isinstance(grid_or_samples, dict):
+        raise ClothsimError("grid_or_samples: expected a dict {field: values}")
+    space = {str(f): P.parse_values(str(f), v) for f, v in grid_or_samples.items()}
+    runs = P.expand(space, samples, seed)
+    base, path = _base_scene(scene)
+
+    # Every run's scene, built and validated before anything runs or is written.
+    draws = kind == "sheet" or video
+    scenes: dict[str, Scene] = {}
+    settings: dict[str, Any] = {}
+    overrides = {k: v for k, v in (("shader", shader), ("size", f"{cell_size[0]}x{cell_size[1]}")) if v is not None}
+    for run in runs:
+        label = f" ({run.id}: {P.params_text(run.params)})"
+        sc = P.build_scene(base, run.params, path, label)
+        scenes[run.id] = sc
+        if draws:
+            try:
+                settings[run.id] = RenderSettings.from_scene(sc).with_overrides(
+                    overrides, label=lambda f: {"shader": "--shader", "size": "--size"}.get(f.split("[")[0], f))
+            except ClothsimError as exc:
+                raise ClothsimError(f"{exc}{label}") from None
+    last = max(frame_list)
+    definition = {
+        "scene": base, "scene_path": os.path.basename(path),
+        "params": {f: [str(v) if isinstance(v, P.Distribution) else v for v in vs] for f, vs in space.items()},
+        "samples": samples, "seed": seed, "frames": last, "every": every, "video": bool(video),
+        "size": list(cell_size) if video else None, "shader": shader if video else None,
+    }
+    data: ds.Dataset | None = None
+    finished: dict[str, dict[str, Any]] = {}
+    if kind == "dataset":
+        data = ds.Dataset(out, definition)
+        data.check()
+        if data.resumed:
+            n_samples = len(sample_frames(last, every))
+            expected = {r.id: {"params": json.loads(json.dumps(r.params)), "samples": n_samples} for r in runs}
+            finished = data.finished(expected)
+    else:
+        check_destination(out, label=os.fspath(out))
+
+    samples_msaa = {rid: s.samples for rid, s in settings.items()}
+    tasks = [Task(id=r.id, scene=scenes[r.id], frames=last, every=every, positions=kind == "dataset",
+                  cells=tuple(frame_list) if kind == "sheet" else (), video=bool(video),
+                  settings=settings.get(r.id), size=cell_size, samples=samples_msaa.get(r.id, 4), threads=1)
+             for r in runs if r.id not in finished]
+    by_id = {r.id: r for r in runs}
+    records: dict[str, dict[str, Any]] = {rid: {**rec, "skipped": True} for rid, rec in finished.items()}
+    images: dict[tuple[str, int], np.ndarray | None] = {}
+    lost = 0
+
+    def finish(result: dict[str, Any]) -> None:
+        run = by_id[result["id"]]
+        record = {"id": run.id, "params": run.params, "seed": seed, "status": result["status"],
+                  "error": result["error"], "path": None, "frames": last, "seconds": round(result["seconds"], 3)}
+        if data is not None:
+            if result["status"] == "done":
+                sc = scenes[run.id]
+                from ..exporters.geometry import cloth_faces, cloth_uvs
+
+                arrays = {
+                    "positions": result["positions"],
+                    "faces": cloth_faces(result["nw"], result["nh"]).astype(np.int32),
+                    "uv": np.asarray(cloth_uvs(result["nw"], result["nh"]), dtype=np.float32),
+                    "pinned": np.asarray(result["pinned"], dtype=bool),
+                    "scene": np.array(json.dumps(P.scene_json(sc))),
+                    "frames": np.array(sample_frames(last, every), dtype=np.int64),
+                }
+                fps = sc.simulation.frames_per_sec / every
+                record["path"] = data.write_run(run.id, arrays, result["video"], fps)
+            data.append(record)
+        else:
+            for f in frame_list:
+                images[(run.id, f)] = result["cells"].get(f) if result["status"] == "done" else None
+        records[run.id] = {**record, "skipped": False}
+
+    if tasks:
+        from .engines import open_executor
+        from .runner import run as run_one
+
+        bar = _bar(len(tasks), progress)
+        n = min(workers or _workers_default(), len(tasks)) if scheduler is None else None
+        try:
+            with open_executor(n, scheduler) as executor:
+                if data is not None:
+                    data.start()  # once the workers are there: a cluster that cannot be reached writes nothing
+                futures = {executor.submit(run_one, t): t for t in tasks}
+                for future in concurrent.futures.as_completed(futures):
+                    task = futures.pop(future)  # drop the result with it once written: memory stays flat
+                    try:
+                        result = future.result()
+                    except concurrent.futures.process.BrokenProcessPool:
+                        result = None
+                    except Exception as exc:  # noqa: BLE001 - a worker lost on a cluster, a transfer failure
+                        result = {"id": task.id, "status": "failed", "seconds": 0.0,
+                                  "error": " ".join(f"{type(exc).__name__}: {exc}".split())}
+                    if result is None:
+                        lost += 1
+                        records[task.id] = {"id": task.id, "params": by_id[task.id].params, "seed": seed,
+                                            "status": "failed", "path": None, "frames": last, "seconds": 0.0,
+                                            "error": "the worker process running it died (not recorded: "
+                                                     "the same command runs it again)", "skipped": False,
+                                            "lost": True}
+                    else:
+                        finish(result)
+                    bar.update(1)
+        finally:
+            bar.close()
+    ordered = [records[r.id] for r in runs]
+    if kind == "sheet":
+        fps = scenes[runs[0].id].simulation.frames_per_sec
+        spec = S.plan(runs, space, frame_list, fps, samples is not None)
+        picture = S.compose(spec, images, cell_size)
+        from PIL import Image
+
+        with atomic_output(out, label=os.fspath(out)) as tmp:
+            Image.fromarray(picture).save(tmp, format="PNG", optimize=True)
+    if report:
+        _summary(ordered, time.perf_counter() - start, out, lost)
+    return ordered
+
+
+def _workers_default() -> int:
+    from .engines import default_workers
+
+    return default_workers()
+
+
+def _bar(total: int, show: bool) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc="sweep", unit="run", disable=not (show and sys.stderr.isatty()),
+                leave=False, file=sys.stderr)
+
+
+def _summary(records: list[dict[str, Any]], seconds: float, out: Any, lost: int) -> None:
+    done = sum(1 for r in records if r["status"] == "done" and not r["skipped"])
+    failed = sum(1 for r in records if r["status"] == "failed" and not r["skipped"])
+    skipped = sum(1 for r in records if r["skipped"])
+    ran = done + failed
+    rate = 60.0 * ran / seconds if seconds > 0 else 0.0
+    print(f"sweep: {len(records)} runs: {done} done, {failed} failed, {skipped} skipped "
+          f"in {seconds:.1f} s ({rate:.1f} runs/min); wrote {os.fspath(out)}", file=sys.stderr)
+    for r in records:
+        if r["status"] == "failed" and not r["skipped"]:
+            print(f"sweep: {r['id']} failed: {r['error']}", file=sys.stderr)
+    if lost:
+        print(f"sweep: {lost} runs were lost with a worker that died; run the same command again to finish them",
+              file=sys.stderr)

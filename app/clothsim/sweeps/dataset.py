@@ -1,0 +1,177 @@
+"""A sweep's dataset folder: its definition, its manifest, one array file per run, and resume.
+
+``OUT/sweep.json`` holds the sweep's definition (base scene, parameters, frames, ...), written
+once when the folder is made; the same OUT with a different definition is refused.
+``OUT/manifest.jsonl`` gets one JSON line per finished run, appended whole and synced as runs
+finish. ``OUT/runs/<id>.npz`` (and ``<id>.mp4`` with video) appear atomically. On resume, the
+last record of each run counts, and a ``done`` record counts only if its files are there and
+read back whole; every other run is done again.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..atomic import atomic_output, check_destination, os_errors
+from ..errors import ClothsimError
+
+__all__ = ["DEFINITION", "MANIFEST", "RUNS", "Dataset", "NPZ_KEYS"]
+
+DEFINITION = "sweep.json"
+MANIFEST = "manifest.jsonl"
+RUNS = "runs"
+FORMAT = "clothsim-sweep/1"
+NPZ_KEYS = ("positions", "faces", "uv", "pinned", "scene", "frames")
+
+
+class Dataset:
+    """The dataset folder ``out`` of a sweep with ``definition`` (a JSON-able dict)."""
+
+    def __init__(self, out: str | os.PathLike[str], definition: dict[str, Any]) -> None:
+        self.label = os.fspath(out)
+        self.out = Path(out)
+        self.definition = {"format": FORMAT, **definition}
+        self.resumed = False
+
+    # -- before any run ------------------------------------------------------------------------
+    def check(self) -> None:
+        """Refuse an OUT that is not a folder, holds someone else's files or another sweep."""
+        out, label = self.out, self.label
+        if out.is_symlink():
+            out = self.out = Path(os.path.realpath(out))
+        if out.exists():
+            if not out.is_dir():
+                raise ClothsimError(f"{label}: exists and is not a folder (a dataset is a folder)")
+            with os_errors(label, "cannot read the folder"):
+                names = os.listdir(out)
+            if names:
+                if DEFINITION not in names:
+                    raise ClothsimError(f"{label}: folder is not empty ({len(names)} "
+                                        f"{'file' if len(names) == 1 else 'files'} not written by clothsim sweep); "
+                                        "choose another or empty it")
+                theirs = self._read_definition()
+                if theirs != self.definition:
+                    raise ClothsimError(f"{label}: holds a different sweep ({_difference(theirs, self.definition)}); "
+                                        "re-run its own command to resume it, or choose another folder")
+                self.resumed = True
+        check_destination(out / DEFINITION, label=label)
+        if self.resumed:
+            check_destination(out / RUNS / "x.npz", label=label)
+
+    def _read_definition(self) -> dict[str, Any]:
+        path = self.out / DEFINITION
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            raise ClothsimError(f"{self.label}: {DEFINITION} is not a clothsim sweep definition "
+                                f"({' '.join(str(exc).split())}); choose another folder") from None
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise ClothsimError(f"{self.label}: {DEFINITION} is not a clothsim sweep definition; choose another folder")
+        return data
+
+    def start(self) -> None:
+        """Write the definition of a new dataset (the folder appears with it)."""
+        if self.resumed:
+            return
+        with atomic_output(self.out / DEFINITION, label=f"{self.label}/{DEFINITION}") as tmp:
+            tmp.write_text(json.dumps(self.definition, indent=1) + "\n", encoding="utf-8")
+
+    # -- resume --------------------------------------------------------------------------------
+    def records(self) -> dict[str, dict[str, Any]]:
+        """The last complete manifest line of each run (a torn last line is ignored)."""
+        path = self.out / MANIFEST
+        found: dict[str, dict[str, Any]] = {}
+        if not path.exists():
+            return found
+        with os_errors(self.label, "cannot read the manifest"):
+            text = path.read_bytes().decode("utf-8", errors="replace")
+        for line in text.splitlines():
+            try:
+                record = json.loads(line)
+            except ValueError:
+                continue
+            if isinstance(record, dict) and isinstance(record.get("id"), str):
+                found[record["id"]] = record
+        return found
+
+    def finished(self, expected: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
+        """The records of runs that need not run again: ``expected`` maps id -> {params, samples,
+        points}; a done run's files are read back and checked, a failed run is final."""
+        out: dict[str, dict[str, Any]] = {}
+        for run_id, record in self.records().items():
+            want = expected.get(run_id)
+            if want is None or record.get("params") != want["params"]:
+                continue
+            if record.get("status") == "failed":
+                out[run_id] = record
+            elif record.get("status") == "done" and self._complete(run_id, record, want):
+                out[run_id] = record
+        return out
+
+    def _complete(self, run_id: str, record: dict[str, Any], want: dict[str, Any]) -> bool:
+        path = self.out / RUNS / f"{run_id}.npz"
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                if set(NPZ_KEYS) - set(data.files):
+                    return False
+                arrays = {k: data[k] for k in NPZ_KEYS}  # reading checks every member's CRC
+        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
+            return False
+        positions = arrays["positions"]
+        if positions.dtype != np.float32 or positions.shape[0] != want["samples"] or positions.shape[2:] != (3,):
+            return False
+        if self.definition.get("video"):
+            video = self.out / RUNS / f"{run_id}.mp4"
+            if not video.is_file() or video.stat().st_size == 0:
+                return False
+        return True
+
+    # -- writing -------------------------------------------------------------------------------
+    def write_run(self, run_id: str, arrays: dict[str, np.ndarray], video: np.ndarray | None, fps: float) -> str:
+        """Write ``runs/<id>.npz`` (and ``.mp4``) atomically; return the npz's relative path."""
+        rel = f"{RUNS}/{run_id}.npz"
+        buffer = io.BytesIO()
+        np.savez(buffer, **arrays)
+        with atomic_output(self.out / rel, label=f"{self.label}/{rel}") as tmp:
+            tmp.write_bytes(buffer.getbuffer())
+        if video is not None:
+            from ..output import open_output
+
+            with open_output(self.out / RUNS / f"{run_id}.mp4", fps) as sink:
+                for frame in video:
+                    sink(frame)
+        return rel
+
+    def append(self, record: dict[str, Any]) -> None:
+        """Append one manifest line, whole, and sync it."""
+        path = self.out / MANIFEST
+        line = json.dumps(record, allow_nan=False, separators=(", ", ": ")) + "\n"
+        with os_errors(f"{self.label}/{MANIFEST}"):
+            with open(path, "ab") as fh:
+                if fh.tell() > 0:
+                    with open(path, "rb") as check:
+                        check.seek(-1, os.SEEK_END)
+                        if check.read(1) != b"\n":  # a line torn by a crash: end it first
+                            fh.write(b"\n")
+                fh.write(line.encode("utf-8"))
+                fh.flush()
+                os.fsync(fh.fileno())
+
+
+def _difference(theirs: dict[str, Any], ours: dict[str, Any]) -> str:
+    keys = [k for k in sorted(set(theirs) | set(ours)) if theirs.get(k) != ours.get(k)]
+    parts = []
+    for k in keys[:3]:
+        a, b = theirs.get(k), ours.get(k)
+        if isinstance(a, (dict, list)) or isinstance(b, (dict, list)):
+            parts.append(f"{k} differs")
+        else:
+            parts.append(f"{k} {json.dumps(a)} there, {json.dumps(b)} here")
+    return "; ".join(parts) or "definition differs"

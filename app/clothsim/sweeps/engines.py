@@ -1,0 +1,106 @@
+"""Where a sweep's runs execute: local worker processes, or an existing Dask distributed cluster.
+
+Both are a :class:`concurrent.futures.Executor`: a ``ProcessPoolExecutor`` whose workers each set
+Numba to one thread and keep one renderer for their lifetime (see :mod:`.runner`), or the
+executor of a ``dask.distributed.Client`` connected to the scheduler's address. The caller
+submits :func:`.runner.run` and collects results with ``concurrent.futures.as_completed``; the
+results (arrays, images) come back to it, so a cluster needs no shared file system.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import os
+import signal
+from collections.abc import Iterator
+from concurrent.futures import Executor, ProcessPoolExecutor
+
+from ..errors import ClothsimError
+
+__all__ = ["CLUSTER_HINT", "default_workers", "open_executor"]
+
+CLUSTER_HINT = "pip install 'clothsim[cluster]'"
+
+
+def default_workers() -> int:
+    """The number of cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _init_worker() -> None:
+    # Ctrl-C reaches the whole process group: the command handles it (and stops the workers),
+    # a worker must not print its own traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # One Numba thread per worker process: the processes are the parallelism. Results are
+    # bit-identical for any thread count, so this changes the speed only.
+    import numba
+
+    numba.set_num_threads(1)
+
+
+def import_distributed(label: str = "--scheduler") -> object:
+    """``dask.distributed``, or one line naming the extra to install."""
+    try:
+        import distributed
+    except ImportError:
+        raise ClothsimError(f"{label}: needs dask.distributed, which is not installed: {CLUSTER_HINT}") from None
+    return distributed
+
+
+def _start_workers(executor: ProcessPoolExecutor, count: int) -> None:
+    """Start every worker now, with Ctrl-C ignored from their first instruction.
+
+    The pool starts a process per submitted task until it has ``count``; a process started while
+    SIGINT is ignored inherits that (across exec), so a Ctrl-C during its start-up cannot print a
+    traceback from inside multiprocessing. The command's own handler is back right after.
+    """
+    import threading
+
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.getsignal(signal.SIGINT) if main else None
+    if main and previous is not None:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        for _ in range(count):
+            executor.submit(os.getpid)
+    finally:
+        if main and previous is not None:
+            signal.signal(signal.SIGINT, previous)
+
+
+@contextlib.contextmanager
+def open_executor(workers: int | None = None, scheduler: str | None = None) -> Iterator[Executor]:
+    """An executor for the runs: ``workers`` local processes, or the Dask cluster at ``scheduler``."""
+    if scheduler is not None:
+        distributed = import_distributed()
+        try:
+            client = distributed.Client(scheduler, timeout="20s", set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            reason = " ".join(str(exc).split()) or type(exc).__name__
+            raise ClothsimError(f"--scheduler {scheduler}: cannot connect: {reason}") from None
+        try:
+            with client.get_executor() as executor:
+                yield executor
+        finally:
+            client.close()
+        return
+    # spawn, not fork: a parent that ran Numba's parallel kernels (the bench's plain loop, a
+    # notebook) holds a threading layer that is not safe to fork.
+    context = multiprocessing.get_context("spawn")
+    count = workers or default_workers()
+    executor = ProcessPoolExecutor(max_workers=count, mp_context=context, initializer=_init_worker)
+    try:
+        _start_workers(executor, count)
+        yield executor
+    except BaseException:
+        # Interrupted or failed: stop the workers now rather than wait for their runs to end.
+        for process in list((getattr(executor, "_processes", None) or {}).values()):
+            with contextlib.suppress(Exception):
+                process.kill()
+        executor.shutdown(wait=False, cancel_futures=True)
+        raise
+    executor.shutdown(wait=True)
