@@ -202,3 +202,24 @@ def test_reset_and_rerun_is_deterministic(integrator: str) -> None:
     sim.reset()
     sim.step(20)
     assert np.array_equal(first, sim.positions)
+
+
+@pytest.mark.parametrize("n, expected", [(6, 1), (91, 2)])
+def test_small_cloths_off_the_spec_path_run_on_one_thread(n: int, expected: int,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    # Each pass of these integrators is its own parallel loop: below PARALLEL_MIN_POINTS (8192) the
+    # fork and join cost more than the work, so a frame runs on one thread and the caller's thread
+    # count is back afterwards.
+    import numba
+
+    from clothsim.sim import integrators
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("Numba has a single thread here: nothing to compare")
+    numba.set_num_threads(2)
+    seen = []
+    monkeypatch.setattr(integrators, "_advance", lambda sim, steps: seen.append(numba.get_num_threads()))
+    sim = clothsim.Simulation(small(n=n).with_simulation(integrator="xpbd"))
+    sim.step(1)
+    assert seen == [expected]
+    assert numba.get_num_threads() == 2
