@@ -21,6 +21,16 @@ def run_cli(*args: str, cwd: Path | None = None, timeout: float = 300) -> subpro
                           timeout=timeout, env=env)
 
 
+def error_line(r: subprocess.CompletedProcess) -> str:
+    """The single stderr line of a failed command, checked for shape: exit 2, no traceback."""
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    assert "Traceback" not in r.stderr, r.stderr
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1, r.stderr
+    assert lines[0].startswith("clothsim: error: "), lines[0]
+    return lines[0]
+
+
 @pytest.fixture
 def cli():
     return run_cli

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import run_cli
+from conftest import error_line, run_cli
 
 import clothsim
 from clothsim.render import mesh as render_mesh
@@ -45,15 +45,6 @@ def scene_file(tmp_path: Path) -> Path:
     path.write_text(json.dumps(SCENE))
     return path
 
-
-def error_line(r: subprocess.CompletedProcess) -> str:
-    """The single stderr line of a failed command: exit 2, no traceback."""
-    assert r.returncode == 2, (r.returncode, r.stderr)
-    assert "Traceback" not in r.stderr, r.stderr
-    lines = r.stderr.splitlines()
-    assert len(lines) == 1, r.stderr
-    assert lines[0].startswith("clothsim: error: "), lines[0]
-    return lines[0]
 
 
 def simulate_npz(scene_file: Path, frames: int, tmp_path: Path) -> np.ndarray:

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO, SCENES, run_cli
+from conftest import REPO, SCENES, error_line, run_cli
 
 FAST = ("--frames", "2", "--every", "1", "--size", "64x64")
 
@@ -45,15 +45,6 @@ def user_folder(folder: Path) -> Path:
     (folder / ".hidden").write_bytes(b"")
     return folder
 
-
-def error_line(r: subprocess.CompletedProcess) -> str:
-    """The single stderr line of a failed command, checked for shape: exit 2, no traceback."""
-    assert r.returncode == 2, (r.returncode, r.stderr)
-    assert "Traceback" not in r.stderr, r.stderr
-    lines = r.stderr.splitlines()
-    assert len(lines) == 1, r.stderr
-    assert lines[0].startswith("clothsim: error: "), lines[0]
-    return lines[0]
 
 
 @pytest.fixture(scope="module")

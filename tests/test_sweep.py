@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from conftest import run_cli
+from conftest import error_line, run_cli
 
 import clothsim
 from clothsim.errors import ClothsimError
@@ -43,14 +43,6 @@ def scene_file(tmp_path: Path) -> Path:
     path.write_text(json.dumps(SCENE))
     return path
 
-
-def error_line(r: subprocess.CompletedProcess) -> str:
-    assert r.returncode == 2, (r.returncode, r.stderr)
-    assert "Traceback" not in r.stderr, r.stderr
-    lines = r.stderr.splitlines()
-    assert len(lines) == 1, r.stderr
-    assert lines[0].startswith("clothsim: error: "), lines[0]
-    return lines[0]
 
 
 def scene_with(tmp_path: Path, params: dict, name: str) -> Path:
