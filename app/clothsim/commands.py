@@ -65,11 +65,12 @@ def _stability_check(scene: Scene, auto: bool) -> Scene:
     return scene
 
 
-def progress(total: int, desc: str):  # noqa: ANN201
-    """A tqdm progress bar on stderr, shown only on a terminal and for runs worth watching."""
+def progress(total: int, desc: str, show: bool = True):  # noqa: ANN201
+    """A tqdm progress bar on stderr, shown only when ``show``, on a terminal and for runs worth
+    watching (otherwise its updates do nothing)."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit="frame", disable=not sys.stderr.isatty() or total < 30,
+    return tqdm(total=total, desc=desc, unit="frame", disable=not show or not sys.stderr.isatty() or total < 30,
                 leave=False, file=sys.stderr)
 
 

@@ -21,6 +21,7 @@ from ..errors import ClothsimError
 from ..output import _destination
 from ..scene import Scene, load_scene
 from ..sim import Simulation
+from ..sweeps.runner import sample_frames
 from ..validate import check, integer
 from . import obj, usd
 from .geometry import ClothNormals, cloth_faces, cloth_uvs, colliders
@@ -66,11 +67,9 @@ def check_export_output(path: str | os.PathLike[str]) -> str:
 
 
 def exported_frames(start: int, frames: int, every: int) -> list[int]:
-    """Frame numbers exported from ``start`` over ``frames`` frames: every ``every``-th, and the last."""
-    numbers = list(range(start, start + frames + 1, every))
-    if numbers[-1] != start + frames:
-        numbers.append(start + frames)
-    return numbers
+    """Frame numbers exported from ``start`` over ``frames`` frames: every ``every``-th, and the last
+    (the sweep's sampling rule, shifted to start at ``start``)."""
+    return [start + f for f in sample_frames(frames, every)]
 
 
 def export(simulation_or_scene: Simulation | Scene | str | os.PathLike[str], out: str | os.PathLike[str],
@@ -122,7 +121,7 @@ def _write(sim: Simulation, fmt: str, out: str | os.PathLike[str], frames: int, 
             writer.frame(sim.frame, positions.astype(np.float32), normals(positions))
 
         emit()
-        with progress_bar(frames, "export") if progress else _NoBar() as bar:
+        with progress_bar(frames, "export", show=progress) as bar:
             for _ in range(frames):
                 sim.step()
                 bar.update()
@@ -131,13 +130,3 @@ def _write(sim: Simulation, fmt: str, out: str | os.PathLike[str], frames: int, 
         writer.finish(numbers[0], numbers[-1], float(scene.simulation.frames_per_sec))
     return numbers
 
-
-class _NoBar:
-    def __enter__(self) -> _NoBar:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        return None
-
-    def update(self, n: int = 1) -> None:
-        return None
