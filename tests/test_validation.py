@@ -8,6 +8,7 @@ the memory check, which is given a 4 MiB budget here) so that a run is one quick
 
 from __future__ import annotations
 
+import copy
 import json
 import math
 import warnings
@@ -131,7 +132,9 @@ def _containers(value: object, path: tuple = ()) -> list[tuple]:
 @st.composite
 def corrupted_scene(draw: st.DrawFn) -> dict:
     """A valid-ish scene with one to three things broken anywhere in it."""
-    d = draw(scene_dict())
+    # A copy: sampled_from hands out the same list object every time (size [32, 32]), and
+    # corrupting it in place would change what later examples draw from the same choices.
+    d = copy.deepcopy(draw(scene_dict()))
     for _ in range(draw(st.integers(1, 3))):
         path = draw(st.sampled_from(_containers(d)))
         target = d
