@@ -49,6 +49,11 @@ PAGE_HEADERS = {
 }
 
 
+TOKEN = web.AppKey("token", str)
+HUB = web.AppKey("hub", "Hub")
+PAGE = web.AppKey("page", bytes)
+
+
 def page_html() -> bytes:
     """The page, read from the package."""
     return resources.files(__package__).joinpath("static/index.html").read_bytes()
@@ -123,7 +128,7 @@ def frame_payload(frame: Frame, engine: Engine) -> bytes:
 
 @web.middleware
 async def _token_check(request: web.Request, handler: Any) -> web.StreamResponse:
-    token = request.app["token"]
+    token = request.app[TOKEN]
     given = request.query.get("token", "")
     if not hmac.compare_digest(given.encode(), token.encode()):
         return web.Response(status=403)
@@ -131,11 +136,11 @@ async def _token_check(request: web.Request, handler: Any) -> web.StreamResponse
 
 
 async def _index(request: web.Request) -> web.Response:
-    return web.Response(body=request.app["page"], content_type="text/html", charset="utf-8", headers=PAGE_HEADERS)
+    return web.Response(body=request.app[PAGE], content_type="text/html", charset="utf-8", headers=PAGE_HEADERS)
 
 
 async def _socket(request: web.Request) -> web.WebSocketResponse:
-    hub: Hub = request.app["hub"]
+    hub: Hub = request.app[HUB]
     engine = hub.engine
     ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=30.0)
     await ws.prepare(request)
@@ -182,7 +187,7 @@ def _handle(viewer: Viewer, text: str) -> None:
 
 
 async def _upload(request: web.Request) -> web.Response:
-    engine: Engine = request.app["hub"].engine
+    engine: Engine = request.app[HUB].engine
     try:
         body = await request.read()
     except web.HTTPRequestEntityTooLarge:
@@ -200,7 +205,7 @@ async def _upload(request: web.Request) -> web.Response:
 
 
 async def _image(request: web.Request) -> web.Response:
-    engine: Engine = request.app["hub"].engine
+    engine: Engine = request.app[HUB].engine
     try:
         png = await asyncio.wrap_future(engine.submit("snapshot"))
     except ClothsimError as exc:
@@ -211,7 +216,7 @@ async def _image(request: web.Request) -> web.Response:
 
 
 async def _clip(request: web.Request) -> web.StreamResponse:
-    engine: Engine = request.app["hub"].engine
+    engine: Engine = request.app[HUB].engine
     path = engine.clip
     if path is None or not path.is_file():
         return _json({"error": "no clip has been recorded yet"}, 404)
@@ -228,9 +233,9 @@ def _json(data: dict[str, Any], status: int) -> web.Response:
 def make_app(hub: Hub, token: str) -> web.Application:
     """The aiohttp application: routes, token check and upload limit."""
     app = web.Application(middlewares=[_token_check], client_max_size=MAX_UPLOAD_BYTES)
-    app["token"] = token
-    app["hub"] = hub
-    app["page"] = page_html()
+    app[TOKEN] = token
+    app[HUB] = hub
+    app[PAGE] = page_html()
     app.router.add_get("/", _index)
     app.router.add_get("/ws", _socket)
     app.router.add_post("/scene", _upload)

@@ -224,19 +224,22 @@ class Engine:
                                      1e3 * sum(self.renderer.timings.values())))
 
     def _render(self) -> np.ndarray:
-        settings = replace(self.settings, camera_position=tuple(float(c) for c in self.orbit.position()),
-                           camera_target=tuple(float(c) for c in self.orbit.target))
+        target = self.orbit.target(self.simulation.positions)
+        settings = replace(self.settings, camera_position=tuple(float(c) for c in self.orbit.position(target)),
+                           camera_target=tuple(float(c) for c in target))
         return self.renderer.render(self.simulation, settings=settings)
 
     def _initial_orbit(self) -> Orbit:
+        # The scene's render.camera, else the renderer's default view (following the cloth).
         sim, s = self.simulation, self.settings
         cloth = sim.scene.cloth
-        orbit = Orbit.course_default(sim.initial_positions, cloth.width, cloth.height)
-        if s.camera_target is not None:
-            orbit.target = np.asarray(s.camera_target, dtype=np.float64)
-        if s.camera_position is not None and not np.allclose(s.camera_position, orbit.target):
-            orbit = Orbit.looking(np.asarray(s.camera_position), orbit.target)
-        return orbit
+        fixed = None if s.camera_target is None else np.asarray(s.camera_target, dtype=np.float64)
+        if s.camera_position is None:
+            return Orbit.course_default(cloth.width, cloth.height, fixed)
+        target = fixed if fixed is not None else sim.initial_positions.mean(axis=0)
+        if np.allclose(s.camera_position, target):
+            return Orbit.course_default(cloth.width, cloth.height, fixed)
+        return Orbit.looking(np.asarray(s.camera_position), target, fixed=fixed is not None)
 
     def _say(self, message: dict[str, Any]) -> None:
         if self.viewers is not None:
