@@ -352,8 +352,20 @@ def test_cli_prints_the_url_and_stops_cleanly_on_ctrl_c():
         url, port = m[1], m[2]
         assert _http(f"http://127.0.0.1:{port}/")[:2] == (403, b"")
         assert _http(url)[0] == 200
-        proc.send_signal(signal.SIGINT)
-        out, err = proc.communicate(timeout=60)
+
+        async def page_open_during_ctrl_c() -> tuple[int | None, float]:
+            async with aiohttp.ClientSession() as s, s.ws_connect(url.replace("http://", "ws://").replace(
+                    "/?token=", "/ws?token=")) as ws:
+                await _next_text(ws, "state")
+                proc.send_signal(signal.SIGINT)
+                start = time.monotonic()
+                while True:
+                    msg = await ws.receive(timeout=60)
+                    if msg.type not in (aiohttp.WSMsgType.TEXT, aiohttp.WSMsgType.BINARY):
+                        return ws.close_code, time.monotonic() - start
+        code, seconds = asyncio.run(page_open_during_ctrl_c())
+        assert code == 1001 and seconds < 10  # the page is told the server went away, at once
+        out, err = proc.communicate(timeout=120)
     finally:
         if proc.poll() is None:
             proc.kill()

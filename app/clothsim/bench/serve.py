@@ -3,8 +3,8 @@
 For each image size, in the same run and the same process: the baseline loop (one simulation
 frame and one ``Renderer.render`` per image, as the server does), the same loop with the JPEG
 encode added, and the server itself with a WebSocket client on this machine counting the frames
-it receives. Each is timed over the same number of seconds after a warm-up; the medians of the
-repeats are printed.
+it receives. Each is timed over the same number of seconds after a warm-up, the three taking
+turns in every repeat; the medians of the repeats are printed.
 """
 
 from __future__ import annotations
@@ -54,9 +54,11 @@ def run(args: argparse.Namespace) -> int:
     print(f"bench serve: {args.scene}, {args.shader}, {args.seconds:g} s x {args.repeats} repeats per figure; medians")
     print(f"{'size':<11}{'render':>9}{'+JPEG':>9}{'streamed':>10}{'vs render':>11}   (frames per second)")
     for width, height in sizes:
-        base = [_baseline(scene, settings, (width, height), args.seconds, jpeg=False) for _ in range(args.repeats)]
-        enc = [_baseline(scene, settings, (width, height), args.seconds, jpeg=True) for _ in range(args.repeats)]
-        streamed = asyncio.run(_streamed(scene, args.scene, settings, (width, height), args.seconds, args.repeats))
+        base, enc, streamed = [], [], []
+        for _ in range(args.repeats):  # interleaved, so that a slow spell of the machine hits all three
+            base.append(_baseline(scene, settings, (width, height), args.seconds, jpeg=False))
+            enc.append(_baseline(scene, settings, (width, height), args.seconds, jpeg=True))
+            streamed.append(asyncio.run(_streamed(scene, args.scene, settings, (width, height), args.seconds)))
         b, e, s = statistics.median(base), statistics.median(enc), statistics.median(streamed)
         print(f"{f'{width}x{height}':<11}{b:>9.1f}{e:>9.1f}{s:>10.1f}{s / b:>10.0%}")
     return 0
@@ -81,25 +83,21 @@ def _baseline(scene, settings, size: tuple[int, int], seconds: float, jpeg: bool
         return frames / (time.perf_counter() - start)
 
 
-async def _streamed(scene, name: str, settings, size: tuple[int, int], seconds: float,  # noqa: ANN001
-                    repeats: int) -> list[float]:
+async def _streamed(scene, name: str, settings, size: tuple[int, int], seconds: float) -> float:  # noqa: ANN001
     import aiohttp
 
     from ..serve.app import Server
 
     server = Server(scene, name, port=0, size=size, samples=settings.samples, settings=settings)
     await server.start()
-    rates = []
     try:
         async with aiohttp.ClientSession() as session:
             ws_url = server.url.replace("http://", "ws://").replace("/?token=", "/ws?token=")
             async with session.ws_connect(ws_url, max_msg_size=0) as ws:
                 await _count(ws, 1.0)  # the first frames build the GL resources
-                for _ in range(repeats):
-                    rates.append(await _count(ws, seconds))
+                return await _count(ws, seconds)
     finally:
         await server.stop()
-    return rates
 
 
 async def _count(ws, seconds: float) -> float:  # noqa: ANN001

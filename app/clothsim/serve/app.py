@@ -21,7 +21,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 
 from ..errors import ClothsimError
 from ..render.settings import RenderSettings
@@ -33,6 +33,8 @@ from .protocol import error_reply, parse_message
 MAX_UPLOAD_BYTES = 1 << 20
 #: Largest WebSocket message from the page (its messages are a few dozen bytes).
 MAX_MESSAGE_BYTES = 64 << 10
+# How long stopping waits for requests in progress (a download) before closing them.
+SHUTDOWN_TIMEOUT_S = 5.0
 # Text messages waiting for a page that does not read; older ones are dropped past this.
 MAX_PENDING_TEXTS = 256
 HEADERS = {
@@ -241,7 +243,14 @@ def make_app(hub: Hub, token: str) -> web.Application:
     app.router.add_post("/scene", _upload)
     app.router.add_get("/image.png", _image)
     app.router.add_get("/clip", _clip)
+    app.on_shutdown.append(_close_pages)
     return app
+
+
+async def _close_pages(app: web.Application) -> None:
+    # An open WebSocket keeps its handler running, and the server's shutdown waits for handlers.
+    for viewer in list(app[HUB].viewers):
+        await viewer.ws.close(code=WSCloseCode.GOING_AWAY, message=b"clothsim serve stopped")
 
 
 class Server:
@@ -273,7 +282,8 @@ class Server:
             await loop.run_in_executor(None, self.engine.start)
             hub = Hub(self.engine, loop)
             self.engine.viewers = hub
-            self._runner = web.AppRunner(make_app(hub, self.token), access_log=None, handle_signals=False)
+            self._runner = web.AppRunner(make_app(hub, self.token), access_log=None, handle_signals=False,
+                                         shutdown_timeout=SHUTDOWN_TIMEOUT_S)
             await self._runner.setup()
             site = web.TCPSite(self._runner, self.host, self.port)
             try:
