@@ -295,6 +295,26 @@ def test_a_blow_up_shows_its_error_and_restarts(server):
     asyncio.run(page())
 
 
+def test_a_failure_inside_a_frame_is_shown_and_the_server_goes_on(server, monkeypatch):
+    renderer_render = None
+
+    def broken(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        monkeypatch.setattr(server.engine.renderer, "render", renderer_render)  # fails once
+        raise RuntimeError("no more buffers")
+
+    async def page() -> None:
+        nonlocal renderer_render
+        async with aiohttp.ClientSession() as s, s.ws_connect(_ws_url(server)) as ws:
+            await _next_frame(ws)
+            renderer_render = server.engine.renderer.render
+            monkeypatch.setattr(server.engine.renderer, "render", broken)
+            assert (await _next_text(ws, "error"))["message"] == "internal error: RuntimeError: no more buffers"
+            first, _ = await _next_frame(ws)
+            header, _ = await _next_frame(ws)
+            assert header["frame"] > first["frame"]
+    asyncio.run(page())
+
+
 def _rss() -> int:
     with open("/proc/self/statm") as f:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")

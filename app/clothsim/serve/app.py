@@ -77,16 +77,20 @@ class Viewer:
         self.wake.set()
 
     async def run(self) -> None:
-        while not self.ws.closed:
-            await self.wake.wait()
-            self.wake.clear()
-            while self.texts:
-                await self.ws.send_str(self.texts.popleft())
-            if self.frame_waiting and self.hub.latest is not None:
-                self.frame_waiting = False
-                payload = self.hub.latest_payload
-                self.hub.engine.frame_taken()
-                await self.ws.send_bytes(payload)
+        try:
+            while not self.ws.closed:
+                await self.wake.wait()
+                self.wake.clear()
+                while self.texts:
+                    await self.ws.send_str(self.texts.popleft())
+                if self.frame_waiting and self.hub.latest is not None:
+                    self.frame_waiting = False
+                    payload = self.hub.latest_payload
+                    self.hub.engine.frame_taken()
+                    await self.ws.send_bytes(payload)
+        except (ConnectionError, RuntimeError):
+            # The page went away while a frame was on its way: the connection's handler ends it.
+            await self.ws.close()
 
 
 class Hub:

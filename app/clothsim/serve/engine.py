@@ -26,7 +26,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..errors import ClothsimError, SceneError, SimulationBlowUp
+from ..errors import ClothsimError, SceneError
 from ..render.settings import SHADERS, RenderSettings
 from ..scene import Scene, bundled_scene_names, load_scene, parse_scene
 from ..sim.simulation import Simulation
@@ -156,6 +156,14 @@ class Engine:
         try:
             self._loop()
         finally:
+            # Whatever was still queued behind the stop gets an answer, so that nobody waits forever.
+            while True:
+                try:
+                    command = self._commands.get_nowait()
+                except queue.Empty:
+                    break
+                if command is not _STOP and command[2] is not None:
+                    command[2].set_exception(ClothsimError("clothsim serve is stopping"))
             if self.recorder is not None:
                 self.recorder.abort()
                 self.recorder = None
@@ -190,9 +198,8 @@ class Engine:
                 future.set_exception(exc)
             return
         except Exception as exc:  # noqa: BLE001 - a bug must not end the server; say so and go on
-            traceback.print_exc(file=sys.stderr)
             if future is not None:
-                future.set_exception(ClothsimError(f"internal error: {type(exc).__name__}: {exc}"))
+                future.set_exception(ClothsimError(_line(exc)))
             return
         if future is not None:
             future.set_result(result)
@@ -203,18 +210,14 @@ class Engine:
             self._step_once = False
             try:
                 sim.step(1)
-            except SimulationBlowUp as exc:
-                self.error = str(exc)
-                self.running = False
-                self._say({"type": "error", "message": self.error})
-                self._broadcast_state()
+            except Exception as exc:  # noqa: BLE001 - the server goes on; the page shows why it stopped
+                self._stopped(exc)
+        self._dirty = False
         try:
             image = self._render()
-        except ClothsimError as exc:
-            self._dirty = False
-            self._say({"type": "error", "message": str(exc)})
+        except Exception as exc:  # noqa: BLE001
+            self._say({"type": "error", "message": _line(exc)})
             return
-        self._dirty = False
         if self.recorder is not None:
             self._record(image)
         jpeg = _encode(image, "JPEG", quality=JPEG_QUALITY)
@@ -222,6 +225,13 @@ class Engine:
         if self.viewers is not None:
             self.viewers.frame(Frame(jpeg, sim.frame, image.shape[1], image.shape[0],
                                      1e3 * sum(self.renderer.timings.values())))
+
+    def _stopped(self, exc: BaseException) -> None:
+        """The simulation failed (a blow-up): stop it, and show why until R restarts it."""
+        self.error = _line(exc)
+        self.running = False
+        self._say({"type": "error", "message": self.error})
+        self._broadcast_state()
 
     def _render(self) -> np.ndarray:
         target = self.orbit.target(self.simulation.positions)
@@ -399,6 +409,16 @@ def _encode(image: np.ndarray, fmt: str, **options: Any) -> bytes:
     buf = io.BytesIO()
     Image.fromarray(image, "RGB").save(buf, format=fmt, **options)
     return buf.getvalue()
+
+
+def _line(exc: BaseException) -> str:
+    """The one line a page shows for an error; an unexpected one also goes to stderr."""
+    if isinstance(exc, ClothsimError):
+        return str(exc)
+    if isinstance(exc, MemoryError):
+        return "out of memory"
+    traceback.print_exception(exc, file=sys.stderr)
+    return f"internal error: {type(exc).__name__}: {exc}"
 
 
 def _jsonable(value: Any) -> Any:
