@@ -9,13 +9,11 @@ scenes are picked from the bundled names, uploads are parsed in memory, and the 
 from __future__ import annotations
 
 import asyncio
-import collections
 import contextlib
 import hmac
 import json
 import secrets
 import shutil
-import struct
 import tempfile
 from importlib import resources
 from pathlib import Path
@@ -26,7 +24,8 @@ from aiohttp import WSCloseCode, WSMsgType, web
 from ..errors import ClothsimError
 from ..render.settings import RenderSettings
 from ..scene import Scene
-from .engine import Engine, Frame
+from .engine import Engine
+from .hub import Hub, Viewer
 from .protocol import error_reply, parse_message
 
 #: Largest uploaded scene (course scenes are a few hundred bytes; the largest bundled is 1 KB).
@@ -35,8 +34,6 @@ MAX_UPLOAD_BYTES = 1 << 20
 MAX_MESSAGE_BYTES = 64 << 10
 # How long stopping waits for requests in progress (a download) before closing them.
 SHUTDOWN_TIMEOUT_S = 5.0
-# Text messages waiting for a page that does not read; older ones are dropped past this.
-MAX_PENDING_TEXTS = 256
 HEADERS = {
     "Cache-Control": "no-store",
     "Referrer-Policy": "no-referrer",
@@ -52,84 +49,13 @@ PAGE_HEADERS = {
 
 
 TOKEN = web.AppKey("token", str)
-HUB = web.AppKey("hub", "Hub")
+HUB = web.AppKey("hub", Hub)
 PAGE = web.AppKey("page", bytes)
 
 
 def page_html() -> bytes:
     """The page, read from the package."""
     return resources.files(__package__).joinpath("static/index.html").read_bytes()
-
-
-class Viewer:
-    """One page's WebSocket: a sender task writes the newest frame and queued texts in turn."""
-
-    def __init__(self, ws: web.WebSocketResponse, hub: "Hub") -> None:
-        self.ws = ws
-        self.hub = hub
-        self.texts: collections.deque[str] = collections.deque(maxlen=MAX_PENDING_TEXTS)
-        self.frame_waiting = False
-        self.wake = asyncio.Event()
-        self.task: asyncio.Task | None = None
-
-    def send_text(self, text: str) -> None:
-        self.texts.append(text)
-        self.wake.set()
-
-    async def run(self) -> None:
-        try:
-            while not self.ws.closed:
-                await self.wake.wait()
-                self.wake.clear()
-                while self.texts:
-                    await self.ws.send_str(self.texts.popleft())
-                if self.frame_waiting and self.hub.latest is not None:
-                    self.frame_waiting = False
-                    payload = self.hub.latest_payload
-                    self.hub.engine.frame_taken()
-                    await self.ws.send_bytes(payload)
-        except (ConnectionError, RuntimeError):
-            # The page went away while a frame was on its way: the connection's handler ends it.
-            await self.ws.close()
-
-
-class Hub:
-    """The pages watching the engine; the engine's frames and messages arrive here from its thread."""
-
-    def __init__(self, engine: Engine, loop: asyncio.AbstractEventLoop) -> None:
-        self.engine = engine
-        self.loop = loop
-        self.viewers: set[Viewer] = set()
-        self.latest: Frame | None = None
-        self.latest_payload = b""
-
-    # called by the engine, in its thread
-    def frame(self, frame: Frame) -> None:
-        self.loop.call_soon_threadsafe(self._on_frame, frame)
-
-    def message(self, message: dict[str, Any]) -> None:
-        self.loop.call_soon_threadsafe(self.broadcast, json.dumps(message))
-
-    # on the event loop
-    def _on_frame(self, frame: Frame) -> None:
-        self.latest = frame
-        self.latest_payload = frame_payload(frame, self.engine)
-        if not self.viewers:
-            self.engine.frame_taken()
-        for v in self.viewers:
-            v.frame_waiting = True
-            v.wake.set()
-
-    def broadcast(self, text: str) -> None:
-        for v in self.viewers:
-            v.send_text(text)
-
-
-def frame_payload(frame: Frame, engine: Engine) -> bytes:
-    """A binary WebSocket message: 4-byte big-endian header length, JSON header, JPEG."""
-    header = json.dumps({"frame": frame.number, "width": frame.width, "height": frame.height,
-                         "render_ms": round(frame.render_ms, 2), "paused": not engine.running}).encode()
-    return struct.pack(">I", len(header)) + header + frame.jpeg
 
 
 @web.middleware

@@ -49,6 +49,7 @@ class Frame:
     width: int
     height: int
     render_ms: float
+    paused: bool
 
 
 class Viewers(Protocol):
@@ -224,7 +225,7 @@ class Engine:
         self._taken = False
         if self.viewers is not None:
             self.viewers.frame(Frame(jpeg, sim.frame, image.shape[1], image.shape[0],
-                                     1e3 * sum(self.renderer.timings.values())))
+                                     1e3 * sum(self.renderer.timings.values()), not self.running))
 
     def _stopped(self, exc: BaseException) -> None:
         """The simulation failed (a blow-up): stop it, and show why until R restarts it."""
