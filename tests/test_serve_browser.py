@@ -154,6 +154,29 @@ def test_switching_the_shader_changes_the_image(served):
     press(driver, "p")
 
 
+def test_drag_rotates_ctrl_drag_pans_the_wheel_zooms_and_space_resets(served):
+    from selenium.webdriver.common.action_chains import ActionChains
+    from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.common.keys import Keys
+
+    st, driver = served
+    orbit = st.engine.orbit
+    start = (orbit.azimuth, orbit.elevation, orbit.distance)
+    canvas = driver.find_element(By.ID, "frame")
+    ActionChains(driver).move_to_element(canvas).click_and_hold().move_by_offset(80, 30).release().perform()
+    wait_until(lambda: orbit.azimuth < start[0] and orbit.elevation > start[1], what="the view to turn")
+    ActionChains(driver).move_to_element(canvas).key_down(Keys.CONTROL).click_and_hold().move_by_offset(40, 0) \
+        .release().key_up(Keys.CONTROL).perform()
+    wait_until(lambda: np.linalg.norm(orbit.offset) > 0, what="the view to pan")
+    ActionChains(driver).scroll_from_origin(ScrollOrigin.from_element(canvas), 0, -200).perform()
+    wait_until(lambda: orbit.distance < start[2], what="the view to zoom in")
+    press(driver, " ")
+    wait_until(lambda: st.engine.orbit is not orbit, what="the camera to reset")
+    reset = st.engine.orbit
+    assert (reset.azimuth, reset.elevation, reset.distance) == start and not reset.offset.any()
+
+
 def test_a_request_without_the_token_gets_403(served):
     st, driver = served
     script = """
