@@ -20,6 +20,7 @@ examples:
   clothsim render sphere --shader phong -o sphere.png
   clothsim export sphere --frames 180 -o sphere.usd   # or -o sphere_obj/ for an OBJ sequence
   clothsim sweep selfCollision --set cloth.density=1,15,1000 --set cloth.ks=10,5000,200000 -o sheet.png
+  clothsim serve sphere            # the interactive GUI in a browser (prints the URL to open)
   clothsim bench speed
   clothsim compile                 # compile every kernel now (images, CI caches, cluster workers)
 """
@@ -58,6 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
     from .sweeps.commands import add_parser as add_sweep_parser
 
     add_sweep_parser(sub)
+
+    from .serve.command import add_parser as add_serve_parser
+
+    add_serve_parser(sub)
     bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling, sweep",
                            description="Benchmarks that print figures measured on this machine.")
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
@@ -66,12 +71,13 @@ def build_parser() -> argparse.ArgumentParser:
     from . import compiling
     from .bench import accuracy, scaling, speed, stability
     from .bench import compile as bench_compile
+    from .bench import serve as bench_serve
     from .bench import sweep as bench_sweep
     from .render.commands import add_parsers as add_render_parsers
 
     speed.add_parser(bench_sub)
     add_render_parsers(sub, bench_sub)
-    for module in (accuracy, stability, scaling, bench_compile, bench_sweep):
+    for module in (accuracy, stability, scaling, bench_compile, bench_sweep, bench_serve):
         module.add_parser(bench_sub)
     compiling.add_parser(sub)
     return parser

@@ -1,0 +1,238 @@
+"""The web server: one static page, one WebSocket per page, and three download/upload endpoints.
+
+Every request needs the server's token (``?token=...``); without it the answer is an empty 403.
+The routes never take a path from the request: the page is one file shipped in the package,
+scenes are picked from the bundled names, uploads are parsed in memory, and the two downloads
+(the image, the last clip) come from the engine.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import hmac
+import json
+import secrets
+import shutil
+import tempfile
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from aiohttp import WSCloseCode, WSMsgType, web
+
+from ..errors import ClothsimError
+from ..render.settings import RenderSettings
+from ..scene import Scene
+from .engine import Engine
+from .hub import Hub, Viewer
+from .protocol import error_reply, parse_message
+
+#: Largest uploaded scene (course scenes are a few hundred bytes; the largest bundled is 1 KB).
+MAX_UPLOAD_BYTES = 1 << 20
+#: Largest WebSocket message from the page (its messages are a few dozen bytes).
+MAX_MESSAGE_BYTES = 64 << 10
+# How long stopping waits for requests in progress (a download) before closing them.
+SHUTDOWN_TIMEOUT_S = 5.0
+HEADERS = {
+    "Cache-Control": "no-store",
+    "Referrer-Policy": "no-referrer",
+    "X-Content-Type-Options": "nosniff",
+}
+PAGE_HEADERS = {
+    **HEADERS,
+    # The page's own inline script and style, images from its own blobs, connections to this server.
+    "Content-Security-Policy": "default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; "
+                               "img-src blob: data:; connect-src 'self'; frame-ancestors 'none'; "
+                               "base-uri 'none'; form-action 'none'",
+}
+
+
+TOKEN = web.AppKey("token", str)
+HUB = web.AppKey("hub", Hub)
+PAGE = web.AppKey("page", bytes)
+
+
+def page_html() -> bytes:
+    """The page, read from the package."""
+    return resources.files(__package__).joinpath("static/index.html").read_bytes()
+
+
+@web.middleware
+async def _token_check(request: web.Request, handler: Any) -> web.StreamResponse:
+    token = request.app[TOKEN]
+    given = request.query.get("token", "")
+    if not hmac.compare_digest(given.encode(), token.encode()):
+        return web.Response(status=403)
+    return await handler(request)
+
+
+async def _index(request: web.Request) -> web.Response:
+    return web.Response(body=request.app[PAGE], content_type="text/html", charset="utf-8", headers=PAGE_HEADERS)
+
+
+async def _socket(request: web.Request) -> web.WebSocketResponse:
+    hub: Hub = request.app[HUB]
+    engine = hub.engine
+    ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=30.0)
+    await ws.prepare(request)
+    viewer = Viewer(ws, hub)
+    hub.viewers.add(viewer)
+    viewer.task = asyncio.ensure_future(viewer.run())
+    engine.watch(+1)
+    try:
+        state = await asyncio.wrap_future(engine.submit("state"))
+        viewer.send_text(json.dumps(state))
+        async for msg in ws:
+            if msg.type == WSMsgType.TEXT:
+                _handle(viewer, msg.data)
+            elif msg.type == WSMsgType.BINARY:
+                viewer.send_text(error_reply("message: expected JSON text, got binary data"))
+            elif msg.type == WSMsgType.ERROR:
+                break
+    finally:
+        hub.viewers.discard(viewer)
+        engine.watch(-1)
+        viewer.task.cancel()
+        with contextlib.suppress(asyncio.CancelledError, ConnectionError, RuntimeError):
+            await viewer.task
+        await ws.close()
+    return ws
+
+
+def _handle(viewer: Viewer, text: str) -> None:
+    engine = viewer.hub.engine
+    try:
+        command = parse_message(text, engine.scenes)
+    except ClothsimError as exc:
+        viewer.send_text(error_reply(str(exc)))
+        return
+    kind = command.pop("type")
+    future = asyncio.wrap_future(engine.submit(kind, **command))
+
+    def done(f: asyncio.Future) -> None:
+        exc = f.exception()
+        if exc is not None:
+            viewer.send_text(error_reply(str(exc)))
+
+    future.add_done_callback(done)
+
+
+async def _upload(request: web.Request) -> web.Response:
+    engine: Engine = request.app[HUB].engine
+    try:
+        body = await request.read()
+    except web.HTTPRequestEntityTooLarge:
+        return _json({"error": f"upload: the scene file is larger than {MAX_UPLOAD_BYTES // 1024} KiB"}, 413)
+    try:
+        text = body.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        return _json({"error": f"{request.query.get('name', 'upload')}: cannot read scene file: not UTF-8 text "
+                               f"({exc.reason} at byte {exc.start})"}, 400)
+    try:
+        label = await asyncio.wrap_future(engine.submit("upload", text=text, name=request.query.get("name")))
+    except ClothsimError as exc:
+        return _json({"error": str(exc)}, 400)
+    return _json({"ok": True, "scene": label}, 200)
+
+
+async def _image(request: web.Request) -> web.Response:
+    engine: Engine = request.app[HUB].engine
+    try:
+        png = await asyncio.wrap_future(engine.submit("snapshot"))
+    except ClothsimError as exc:
+        return _json({"error": str(exc)}, 500)
+    name = f"clothsim-{engine.scene_name_stem()}-{engine.simulation.frame:05d}.png"
+    return web.Response(body=png, content_type="image/png",
+                        headers={**HEADERS, "Content-Disposition": f'attachment; filename="{name}"'})
+
+
+async def _clip(request: web.Request) -> web.StreamResponse:
+    engine: Engine = request.app[HUB].engine
+    path = engine.clip
+    if path is None or not path.is_file():
+        return _json({"error": "no clip has been recorded yet"}, 404)
+    kind = "video/mp4" if path.suffix == ".mp4" else "image/gif"
+    name = f"clothsim-{engine.scene_name_stem()}{path.suffix}"
+    return web.Response(body=path.read_bytes(), content_type=kind,
+                        headers={**HEADERS, "Content-Disposition": f'attachment; filename="{name}"'})
+
+
+def _json(data: dict[str, Any], status: int) -> web.Response:
+    return web.json_response(data, status=status, headers=HEADERS)
+
+
+def make_app(hub: Hub, token: str) -> web.Application:
+    """The aiohttp application: routes, token check and upload limit."""
+    app = web.Application(middlewares=[_token_check], client_max_size=MAX_UPLOAD_BYTES)
+    app[TOKEN] = token
+    app[HUB] = hub
+    app[PAGE] = page_html()
+    app.router.add_get("/", _index)
+    app.router.add_get("/ws", _socket)
+    app.router.add_post("/scene", _upload)
+    app.router.add_get("/image.png", _image)
+    app.router.add_get("/clip", _clip)
+    app.on_shutdown.append(_close_pages)
+    return app
+
+
+async def _close_pages(app: web.Application) -> None:
+    # An open WebSocket keeps its handler running, and the server's shutdown waits for handlers.
+    for viewer in list(app[HUB].viewers):
+        await viewer.ws.close(code=WSCloseCode.GOING_AWAY, message=b"clothsim serve stopped")
+
+
+class Server:
+    """``clothsim serve`` as an object: start it in a running event loop, stop it, read its URL.
+
+    ``scene`` and ``name`` are the scene to start with and how the page names it; ``port`` 0 picks
+    a free port. The token is random unless given.
+    """
+
+    def __init__(self, scene: Scene, name: str, host: str = "127.0.0.1", port: int = 8000,
+                 size: tuple[int, int] = (800, 800), samples: int = 4, token: str | None = None,
+                 settings: RenderSettings | None = None) -> None:
+        self.host, self.port = host, port
+        self.token = token or secrets.token_urlsafe(24)
+        self._folder = Path(tempfile.mkdtemp(prefix="clothsim-serve-"))
+        self.engine = Engine(scene, name, size, samples, clip_folder=self._folder, settings=settings)
+        self._runner: web.AppRunner | None = None
+
+    @property
+    def url(self) -> str:
+        """The address to open, token included."""
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}/?token={self.token}"
+
+    async def start(self) -> str:
+        """Create the renderer, start listening, and return :attr:`url`."""
+        loop = asyncio.get_running_loop()
+        try:
+            await loop.run_in_executor(None, self.engine.start)
+            hub = Hub(self.engine, loop)
+            self.engine.viewers = hub
+            self._runner = web.AppRunner(make_app(hub, self.token), access_log=None, handle_signals=False,
+                                         shutdown_timeout=SHUTDOWN_TIMEOUT_S)
+            await self._runner.setup()
+            site = web.TCPSite(self._runner, self.host, self.port)
+            try:
+                await site.start()
+            except OSError as exc:
+                raise ClothsimError(f"--port: cannot listen on {self.host}:{self.port}: "
+                                    f"{exc.strerror or exc}") from None
+            sockets = getattr(site._server, "sockets", None) or []  # noqa: SLF001 - the port 0 picked
+            if sockets:
+                self.port = int(sockets[0].getsockname()[1])
+        except BaseException:
+            await self.stop()
+            raise
+        return self.url
+
+    async def stop(self) -> None:
+        """Close every page's connection, stop the engine and remove the clips folder."""
+        if self._runner is not None:
+            await self._runner.cleanup()
+            self._runner = None
+        await asyncio.get_running_loop().run_in_executor(None, self.engine.stop)
+        shutil.rmtree(self._folder, ignore_errors=True)
