@@ -268,11 +268,14 @@ class Simulation:
                          track.times, track.points, track.velocity, self.dt, self._clock)
 
     def _place_pins(self) -> None:
-        """Pinned points at rest + the pin offset at the current time (both positions)."""
+        """At the start, the whole cloth moved by the pins' offset at time 0, at rest: the pins are
+        then at rest + offset(0) with no jump in the first substep."""
         pm = self._kernel_args[5]
         if pm is not None:
-            move_pins(self._pos, self._last, pm, self.time, np.empty(3))
-            self._last[:, self._pins] = self._pos[:, self._pins]
+            offset = np.empty(3)
+            move_pins(self._pos, self._last, pm, self.time, offset)
+            self._pos[...] = self.initial_positions.T + offset[:, None]
+            self._last[...] = self._pos
 
     # ------------------------------------------------------------------------------------------
     # Stepping
