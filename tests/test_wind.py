@@ -276,3 +276,54 @@ def test_cli_refuses_a_bad_wind_in_one_line(tmp_path):
     line = error_line(run_cli("simulate", str(path), "--frames", "1", "--out", str(tmp_path / "s.npz")))
     assert line == f"clothsim: error: {path}: wind.air_density: must be >= 0, got -1"
     assert not (tmp_path / "s.npz").exists()
+
+
+# -- the commands ------------------------------------------------------------------------------------
+def test_resolved_scene_json_round_trips_wind_and_pin_motion():
+    from clothsim.sweeps.params import scene_json
+
+    data = curtain([{"velocity": [1, 2, 3], "turbulence": 0.5, "seed": 9}, {"lift": 0.3, "velocity": [0, 0, 1]}])
+    for motion in ({"velocity": [0.1, 0, 0]}, {"keyframes": [[0, [0, 0, 0]], [1.5, [0, 0.2, 0]]]}):
+        data["cloth"]["pin_motion"] = motion
+        scene = scene_from_dict(data, "t.json")
+        again = scene_from_dict(json.loads(json.dumps(scene_json(scene))), "t.json")
+        assert again.winds == scene.winds and again.cloth == scene.cloth
+    assert "wind" not in scene_json(scene_from_dict(curtain(), "t.json"))
+
+
+def test_flag_from_the_command_line_and_a_wind_sweep(tmp_path):
+    small = json.loads((clothsim.scene.resolve_scene_path("flag")).read_text())
+    small["cloth"].update(num_width_points=9, num_height_points=6, pinned=[[0, j] for j in range(6)])
+    path = tmp_path / "flag.json"
+    path.write_text(json.dumps(small))
+    r = run_cli("simulate", "flag", "--frames", "2", "--out", str(tmp_path / "f.npz"))
+    assert r.returncode == 0, r.stderr
+    out = tmp_path / "runs"
+    r = run_cli("sweep", str(path), "--set", "wind.velocity.2=3,-3", "--frames", "6", "--workers", "1", "-o", str(out))
+    assert r.returncode == 0, r.stderr
+    records = [json.loads(line) for line in (out / "manifest.jsonl").read_text().splitlines()]
+    assert [r["params"] for r in records] == [{"wind.velocity.2": 3}, {"wind.velocity.2": -3}]
+    z = {}
+    for rec in records:
+        with np.load(out / rec["path"]) as run_file:
+            scene = json.loads(str(run_file["scene"]))
+            z[rec["params"]["wind.velocity.2"]] = run_file["positions"][-1][:, 2].mean()
+            assert scene["wind"][0]["velocity"][2] == rec["params"]["wind.velocity.2"]
+    assert z[3] > 0 > z[-3]
+
+
+def test_profiled_run_gives_the_same_bits_and_names_skipped_passes():
+    from clothsim.sim.profile import Profiler
+
+    data = curtain({"velocity": [1.0, 0, 2.0], "turbulence": 3.0}, nw=8, nh=8)
+    data["cloth"]["pin_motion"] = {"velocity": [0, 0.2, 0]}
+    plain = run(data, 3)
+    sim = clothsim.Simulation(scene_from_dict(data, "t.json"))
+    prof = Profiler(sim)
+    for _ in range(3):
+        prof.frame()
+    assert np.array_equal(plain.positions, sim.positions)
+    assert "wind" not in prof.skipped() and "moving pins" not in prof.skipped()
+    skipped = Profiler(run(curtain(), 0)).skipped()
+    assert skipped["wind"] == "scene has no wind (or only still air)"
+    assert skipped["moving pins"] == "cloth has no pin_motion"

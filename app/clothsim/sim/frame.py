@@ -1,5 +1,5 @@
 """One frame = ``steps`` substeps in a single compiled call, in the spec's substep order:
-forces -> integrate -> self-collision -> colliders -> Provot.
+forces (+ wind) -> integrate (+ moving pins) -> self-collision -> colliders -> Provot.
 
 The call is run by a team of threads (:mod:`clothsim.sim.team`) that share out each pass by
 the same work items as the per-pass parallel kernels (``spring_pass``, ``verlet``, ...) and meet

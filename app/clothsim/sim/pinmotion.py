@@ -17,10 +17,12 @@ from ..motion import position_at
 from .jit import CHUNKS, EXACT, KERNEL
 from .team import share
 
-# Compiled eagerly, with their own (IEEE) options: compiled first as the callee of a fast-math
-# kernel, Numba built them with the caller's flags, and the contracted arithmetic put a pin one
-# ulp off rest + Track.at(t) (the Python evaluation).
-offset_at = njit("void(f8[::1], f8[:, ::1], f8[::1], f8, f8[::1])", **EXACT)(position_at)
+# ``fastmath=False`` said explicitly: Numba compiles a callee that does not set it with its
+# caller's fast-math flags, and as the frame kernel's callee the contracted arithmetic put a pin
+# one ulp off rest + Track.at(t) (the Python evaluation the tests compare with).
+IEEE = {**EXACT, "fastmath": False}
+
+offset_at = njit(**IEEE)(position_at)
 
 
 @njit(inline="always", **KERNEL)
@@ -45,7 +47,7 @@ def move_pins(pos: np.ndarray, last: np.ndarray, pm: tuple, t: float, offset: np
         pin_chunk(pos, last, pm, offset, c)
 
 
-@njit("f8(f8[::1], i8, f8)", **EXACT)
+@njit(**IEEE)
 def substep_time(clock: np.ndarray, step: int, dt: float) -> float:
     """Time (s) at the start of substep ``step`` of a call: clock = (base time, substeps since)."""
     return clock[0] + (clock[1] + step) * dt
