@@ -65,10 +65,10 @@ def test_force_on_one_triangle_is_the_closed_form(velocity, lift):
     dt = 1 / 2700
     wind = WindSpec(velocity=velocity, drag=1.3, lift=lift, air_density=1.1)
     rows, modes = wind_rows((wind,))
-    tris = np.array([[0], [1], [2]], dtype=np.int64)
+    tris = np.array([[0], [1], [2]], dtype=np.uint64)
     pos = np.ascontiguousarray(corners.T)
     last = np.ascontiguousarray((corners - moved).T)
-    group = Wind(rows, modes, tris, *incidence(tris, 3), np.zeros((3, 1)), 1 / dt, dt, np.zeros(2))
+    group = Wind(rows, modes, tris, *incidence(tris, 3), np.zeros((3, 1)), np.zeros((12, 1)), 1 / dt, dt, np.zeros(2))
     forces = np.zeros((3, 3))
     add_wind(pos, last, forces, group, 0.0)
     expected = closed_form(*corners, moved.mean(axis=0) / dt, wind) / 3

@@ -256,8 +256,10 @@ class Simulation:
             self._tris = triangles(self.nw, self.nh)
             self._incidence = incidence(self._tris, self.nw * self.nh)
             self._tforce = np.zeros((3, self._tris.shape[1]))
+            self._wind_scratch = np.zeros((12, self._tris.shape[1]))
         dt = self.dt
-        return Wind(rows, modes, self._tris, *self._incidence, self._tforce, 1.0 / dt, dt, self._clock)
+        return Wind(rows, modes, self._tris, *self._incidence, self._tforce, self._wind_scratch, 1.0 / dt, dt,
+                    self._clock)
 
     def _pin_group(self) -> PinMotion | None:
         motion = self.scene.cloth.pin_motion

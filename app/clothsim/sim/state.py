@@ -92,7 +92,8 @@ class Colliders(NamedTuple):
 class Wind(NamedTuple):
     """The winds (:mod:`clothsim.sim.aero`): their rows and gust modes (:func:`clothsim.wind.wind_rows`),
     the mesh's triangles (3, T), each point's triangles (``start`` (N + 1,), ``incident``), the
-    per-triangle force buffer (3, T), 1/dt and the clock (see :class:`PinMotion`)."""
+    per-triangle force buffer (3, T) and work space (12, T), 1/dt, dt and the clock (see
+    :class:`PinMotion`)."""
 
     rows: np.ndarray
     modes: np.ndarray
@@ -100,6 +101,7 @@ class Wind(NamedTuple):
     start: np.ndarray
     incident: np.ndarray
     tforce: np.ndarray
+    scratch: np.ndarray
     inv_dt: float
     dt: float
     clock: np.ndarray
