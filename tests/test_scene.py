@@ -62,8 +62,8 @@ def test_unknown_key_inside_an_object_warns_with_its_name():
 
 
 def test_unknown_top_level_object_is_an_error():
-    with pytest.raises(SceneError, match="wind"):
-        parse_scene(json.dumps({"cloth": COURSE, "wind": {}}))
+    with pytest.raises(SceneError, match="breeze: unknown top-level object"):
+        parse_scene(json.dumps({"cloth": COURSE, "breeze": {}}))
 
 
 def test_orientation_names():

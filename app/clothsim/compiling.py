@@ -98,7 +98,8 @@ def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], 
 # Ahead of time
 
 
-def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet", damping_mode: str = "spec"):
+def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet", damping_mode: str = "spec",
+                wind: bool = False, pin_motion: bool = False):
     from .scene import scene_from_dict
 
     data: dict[str, Any] = {
@@ -110,12 +111,17 @@ def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet"
     if colliders:
         data["sphere"] = {"origin": [0.5, 0.5, 0.5], "radius": 0.2, "friction": 0.3}
         data["plane"] = {"point": [0, 0, 0], "normal": [0, 1, 0], "friction": 0.5}
+    if wind:
+        data["wind"] = {"velocity": [1, 0, 0], "turbulence": 1}
+    if pin_motion:
+        data["cloth"]["pin_motion"] = {"velocity": [0, 0.1, 0]}
     return scene_from_dict(data, "<compile>")
 
 
 def work_items() -> list[tuple[str, Callable[[], None]]]:
     """Everything ``clothsim compile`` compiles: each frame-kernel plan (self-collision mode x
-    colliders), each other integrator, the rest detector and the renderer's mesh kernel."""
+    colliders; wind and moving pins with the spec's self-collision, as the bundled ``flag`` uses),
+    each other integrator, the rest detector and the renderer's mesh kernel."""
     from .sim import Simulation
 
     def step(scene) -> Callable[[], None]:  # noqa: ANN001
@@ -123,6 +129,8 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
 
     items = [(f"frame kernel: self-collision {mode}, {'colliders' if col else 'no colliders'}",
               step(_tiny_scene(mode, col))) for mode in ("spec", "off", "grid") for col in (False, True)]
+    items += [("frame kernel: self-collision spec, wind", step(_tiny_scene("spec", False, wind=True))),
+              ("frame kernel: self-collision spec, moving pins", step(_tiny_scene("spec", False, pin_motion=True)))]
     items += [(f"integrator {name}", step(_tiny_scene("spec", True, name)))
               for name in ("symplectic_euler", "implicit_euler", "xpbd")]
     items.append(("verlet, rate damping", step(_tiny_scene("spec", True, "verlet", "rate"))))

@@ -1,8 +1,9 @@
 """Scene files: the course's JSON format (plus optional extensions) -> a validated, typed :class:`Scene`.
 
 Course files load unchanged: top-level ``cloth``, ``sphere``, ``plane``. Extensions, all optional:
-a ``simulation`` object, ``sphere``/``plane`` given as lists, and a ``render`` object that the
-renderer validates itself. Every problem raises :class:`~clothsim.errors.SceneError` naming the
+a ``simulation`` object, ``sphere``/``plane`` given as lists, ``wind`` (:mod:`clothsim.wind`),
+``cloth.pin_motion`` (:mod:`clothsim.motion`), and a ``render`` object that the renderer
+validates itself. Every problem raises :class:`~clothsim.errors.SceneError` naming the
 file, the field path (``cloth.num_width_points``, ``sphere[1].radius``) and what is wrong.
 """
 
@@ -17,8 +18,10 @@ from typing import Any
 
 from . import validate as V
 from .errors import ClothsimError, SceneError
+from .motion import MOTION, MotionSpec
 from .resources import data_dir
 from .validate import SceneWarning  # noqa: F401 - warned by the rules, imported from here by users
+from .wind import WINDS, WindSpec
 
 HORIZONTAL = 0
 VERTICAL = 1
@@ -54,6 +57,8 @@ class ClothSpec:
     enable_structural: bool = True
     enable_shearing: bool = True
     enable_bending: bool = True
+    #: offset of every pinned point over time (``cloth.pin_motion``), None: pins stay put
+    pin_motion: MotionSpec | None = None
 
     @property
     def num_points(self) -> int:
@@ -101,6 +106,7 @@ class Scene:
     cloth: ClothSpec
     spheres: tuple[SphereSpec, ...] = ()
     planes: tuple[PlaneSpec, ...] = ()
+    winds: tuple[WindSpec, ...] = ()
     simulation: SimulationSpec = field(default_factory=SimulationSpec)
     render: dict[str, Any] | None = None
     path: str = "<scene>"
@@ -191,7 +197,7 @@ def scene_from_dict(data: Any, path: str = "<scene>") -> Scene:
     values = SCENE(data, V.At(path))
     cloth = ClothSpec(**values["cloth"])
     _check_memory(cloth, values["simulation"], path)
-    return Scene(cloth=cloth, spheres=values["spheres"], planes=values["planes"],
+    return Scene(cloth=cloth, spheres=values["spheres"], planes=values["planes"], winds=values["winds"],
                  simulation=values["simulation"], render=values["render"], path=path)
 
 
@@ -240,6 +246,17 @@ def _pinned(done: dict[str, Any]) -> V.Rule:
     return V.list_of(pair, what="[x, y] index pairs")
 
 
+def _pin_motion(done: dict[str, Any]) -> V.Rule:
+    def check(value: Any, at: V.At) -> MotionSpec | None:
+        if value is None:
+            return None
+        motion = MOTION(value, at)
+        if not done.get("pinned"):
+            raise at.fail("the cloth has no pinned points to move (cloth.pinned is empty)")
+        return motion
+    return check
+
+
 def _unit(v: tuple[float, float, float], at: V.At) -> tuple[float, float, float]:
     length = math.hypot(*v)
     return (v[0] / length, v[1] / length, v[2] / length)
@@ -263,6 +280,7 @@ CLOTH = V.record({
     "enable_structural": V.default(V.boolean, True),
     "enable_shearing": V.default(V.boolean, True),
     "enable_bending": V.default(V.boolean, True),
+    "pin_motion": V.Field(depends=_pin_motion, default=None),
 })
 
 SPHERE = V.record({
@@ -310,9 +328,10 @@ SCENE = V.record({
     "cloth": V.required(CLOTH),
     "sphere": V.default(V.one_or_many(V.then(SPHERE, lambda v, at: SphereSpec(**v))), (), dest="spheres"),
     "plane": V.default(V.one_or_many(V.then(PLANE, lambda v, at: PlaneSpec(**v))), (), dest="planes"),
+    "wind": V.default(WINDS, (), dest="winds"),
     "simulation": V.default(_simulation, _SIM_DEFAULTS, dest="simulation"),
     "render": V.default(_render, None),
-}, unknown="unknown top-level object (expected one of: cloth, sphere, plane, simulation, render)")
+}, unknown="unknown top-level object (expected one of: cloth, sphere, plane, wind, simulation, render)")
 
 
 # ----------------------------------------------------------------------------------------------

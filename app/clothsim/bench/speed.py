@@ -4,6 +4,7 @@ vectorised-NumPy baseline timed in the same run."""
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import statistics
 import time
 
@@ -46,7 +47,12 @@ def run(args: argparse.Namespace) -> int:
     scenes = [load_scene(name) for name in names]  # a bad name fails before any timing
     print(f"{'scene':<15}{'self-coll.':>11}{'ms/frame':>10}{'substeps/s':>12}{'x realtime':>11}"
           f"{'numpy ms':>10}{'speedup':>9}")
+    rows = []
     for name, scene in zip(names, scenes):
+        rows.append((name, scene))
+        if scene.winds:  # the same scene in still air: what the wind costs
+            rows.append((f"{name} -wind", dataclasses.replace(scene, winds=())))
+    for name, scene in rows:
         for mode in ("off", "spec"):
             sc = scene.with_simulation(self_collision=mode)
             sim = Simulation(sc)
@@ -63,5 +69,6 @@ def run(args: argparse.Namespace) -> int:
                 ratio = f"{baseline_ms / ms:.0f}x"
             print(f"{name:<15}{mode:>11}{ms:>10.3f}{steps * 1e3 / ms:>12.0f}{realtime:>10.1f}x{base:>10}{ratio:>9}",
                   flush=True)
-    print("medians of repeats; numpy = vectorised NumPy baseline of the same step without self-collision")
+    print("medians of repeats; numpy = vectorised NumPy baseline of the same step without self-collision "
+          "(and without wind); '-wind': the scene above in still air")
     return 0

@@ -11,9 +11,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .aero import add_wind
 from .forces import accumulate_forces
 from .jit import KERNEL, EXACT
 from .passes import corrections
+from .pinmotion import move_pins, substep_time
 
 
 @njit(**KERNEL)
@@ -46,12 +48,19 @@ def verlet_rate_step(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, free
 @njit(**EXACT)
 def run_verlet_rate(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.ndarray, free: np.ndarray,
                     blocks: np.ndarray, stream: tuple, rest: np.ndarray, nw: int,
-                    mass: float, gravity: np.ndarray, dt: float, f: float, phi: float, post: tuple) -> int:
-    """``steps`` substeps of rate-damped Verlet plus the shared corrections; returns colliders skipped."""
+                    mass: float, gravity: np.ndarray, dt: float, f: float, phi: float, post: tuple,
+                    wind: tuple | None, pins: tuple | None) -> int:
+    """``steps`` substeps of rate-damped Verlet plus the shared corrections; returns colliders skipped.
+    ``wind`` and ``pins`` are the :mod:`clothsim.sim.state` groups, None when the scene has none."""
     skipped = 0
-    for _ in range(steps):
+    offset = np.empty(3)
+    for s in range(steps):
         accumulate_forces(pos, forces, stream, mass, gravity)
+        if wind is not None:
+            add_wind(pos, last, forces, wind, substep_time(wind.clock, s, wind.dt))
         verlet_rate_step(pos, last, forces, free, 1.0 / mass, dt, f, phi)
+        if pins is not None:
+            move_pins(pos, last, pins, substep_time(pins.clock, s + 1, pins.dt), offset)
         skipped += corrections(pos, last, free, blocks, rest, nw, post)
     return skipped
 
@@ -85,12 +94,17 @@ def velocities_from_positions(pos: np.ndarray, last: np.ndarray, vel: np.ndarray
 def run_symplectic(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray,
                    free: np.ndarray, blocks: np.ndarray, stream: tuple, rest: np.ndarray, nw: int,
                     mass: float, gravity: np.ndarray, dt: float, f: float, phi: float,
-                   post: tuple, fix_velocity: bool) -> int:
+                   post: tuple, fix_velocity: bool, wind: tuple | None, pins: tuple | None) -> int:
     """``steps`` substeps of symplectic Euler plus the shared corrections; returns colliders skipped."""
     skipped = 0
-    for _ in range(steps):
+    offset = np.empty(3)
+    for s in range(steps):
         accumulate_forces(pos, forces, stream, mass, gravity)
+        if wind is not None:
+            add_wind(pos, last, forces, wind, substep_time(wind.clock, s, wind.dt))
         symplectic_step(pos, last, vel, forces, free, 1.0 / mass, dt, f, phi)
+        if pins is not None:
+            move_pins(pos, last, pins, substep_time(pins.clock, s + 1, pins.dt), offset)
         skipped += corrections(pos, last, free, blocks, rest, nw, post)
         if fix_velocity:
             velocities_from_positions(pos, last, vel, free, dt)

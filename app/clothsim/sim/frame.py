@@ -1,5 +1,5 @@
 """One frame = ``steps`` substeps in a single compiled call, in the spec's substep order:
-forces -> integrate -> self-collision -> colliders -> Provot.
+forces (+ wind) -> integrate (+ moving pins) -> self-collision -> colliders -> Provot.
 
 The call is run by a team of threads (:mod:`clothsim.sim.team`) that share out each pass by
 the same work items as the per-pass parallel kernels (``spring_pass``, ``verlet``, ...) and meet
@@ -27,10 +27,12 @@ from numba import njit, prange, types
 
 from .jit import CHUNKS, KERNEL, PARALLEL, call_native, native_address
 
+from .aero import wind_chunk, wind_gather
 from .collide import collide_planes, collide_spheres
 from .constraints import provot_band, provot_bands, provot_cut
 from .forces import gather_chunk, spring_job
 from .integrate import verlet_chunk
+from .pinmotion import offset_at, pin_chunk, substep_time
 from .selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from .team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
 
@@ -174,7 +176,7 @@ def collide_reachable(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spher
 
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
-            col: tuple | None, sync: np.ndarray, passes: int) -> None:
+            col: tuple | None, wind: tuple | None, pins: tuple | None, sync: np.ndarray, passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes.
 
     Returns early, with the state half-way through a substep, when a barrier reports that the
@@ -215,12 +217,22 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         # skipping stays exact.
         margin = 0.0 if not self_on else col.self_margin
         cols = np.empty((2, 64))
+    if pins is not None:
+        offset = np.empty(3)
     gen = np.int64(0)
-    for _ in range(steps):
+    for step in range(steps):
         if integrate:
             lo, hi = share(spring_jobs, member, size)
             for job in range(lo, hi):
                 spring_job(pos, st.offsets, st.k, st.spring_rest, st.buf, job)
+            if wind is not None:
+                # the triangles' wind forces read only positions: same phase as the springs
+                now = substep_time(wind.clock, step, wind.dt)
+                w0, w1 = share(CHUNKS, member, size)
+                for c in range(w0, w1):
+                    wind_chunk(pos, last, wind, now, c)
+            if pins is not None:
+                offset_at(pins.times, pins.points, pins.velocity, substep_time(pins.clock, step + 1, pins.dt), offset)
             gen = barrier(sync, size, gen)
             if gen < 0:
                 return
@@ -231,7 +243,11 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     hist[member] = 0
             for c in range(lo, hi):
                 gather_chunk(st.offsets, st.buf, st.mass, st.gravity, st.forces, c)
+                if wind is not None:
+                    wind_gather(wind, st.forces, c)
                 verlet_chunk(pos, last, st.forces, st.pins, st.h2, st.keep, c)
+                if pins is not None:
+                    pin_chunk(pos, last, pins, offset, c)
                 if spec is not None:
                     if self_on:
                         # the spec's map is of the positions just integrated: bin them while in cache
@@ -342,29 +358,29 @@ def _addresses(argtypes: tuple) -> tuple[int, int]:
     def meanwhile() -> None:
         if repel is not None:
             repel_slots.compile(repel)
-        run_substeps.compile((i64, *argtypes[3:8], i64, i64, i64))
+        run_substeps.compile((i64, *argtypes[3:10], i64, i64, i64))
         side_kernels()
 
     compile_elsewhere(_member, argtypes, meanwhile)
     return native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel)
 
 
-def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
-                     sync: np.ndarray) -> tuple[int, int]:
+def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None, wind: tuple | None,
+                     pins: tuple | None, sync: np.ndarray) -> tuple[int, int]:
     """Addresses of :func:`_member` compiled for these state groups and of the
     :func:`~clothsim.sim.selfcollide.repel_slots` it calls (0 without the spec's hash), compiled or
     loaded from the cache on first use; the second goes into ``SpecHash.repel``."""
     i64 = types.int64
-    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, sync)), i64))
+    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, wind, pins, sync)), i64))
 
 
 @njit(**PARALLEL)
 def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
-                 sync: np.ndarray, size: int, passes: int, member: int) -> int:
+                 wind: tuple | None, pins: tuple | None, sync: np.ndarray, size: int, passes: int, member: int) -> int:
     """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
 
-    ``st``, ``spec``, ``grid`` and ``col`` are the named tuples of :mod:`clothsim.sim.state`
-    (the last three ``None`` for a pass the scene does not use). ``sync`` is
+    ``st``, ``spec``, ``grid``, ``col``, ``wind`` and ``pins`` are the named tuples of
+    :mod:`clothsim.sim.state` (all but the first ``None`` for a pass the scene does not use). ``sync`` is
     :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
     :mod:`clothsim.sim.team`); the result does not depend on it. After the call
     ``sync[team.ABORT]`` set means the frame was given up half-way (restore and run it alone).
@@ -382,7 +398,7 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
             me = 0
             if working == size:
                 me = np.int64(m)
-            if call_native(member, (me, working, steps, st, spec, grid, col, sync, passes)) != 0:
+            if call_native(member, (me, working, steps, st, spec, grid, col, wind, pins, sync, passes)) != 0:
                 sync[FAILED] = 1
                 atomic_cas(sync, ABORT, 0, 1)
     return st.skips[0]

@@ -84,12 +84,15 @@ def stability_warning(scene: Scene) -> str | None:
 
 
 def blow_up_reason(pos: np.ndarray, last: np.ndarray, free: np.ndarray, dt: float, gravity: np.ndarray,
-                   start: np.ndarray) -> str | None:
+                   start: np.ndarray, driven: float = 0.0) -> str | None:
     """What blew up, or None. ``pos``/``last``/``start`` are (3, N), ``start`` the initial positions.
 
     Energy test: rest lengths are measured from the initial grid, so the cloth starts with no
     elastic energy and (static colliders and damping only remove energy) its kinetic energy can
-    only come from the work gravity has done, g . (drop of the free points' centre of mass).
+    only come from the work gravity has done, g . (drop of the free points' centre of mass), and
+    from what drives it: ``driven`` (m/s) bounds the speed of the air (wind plus gusts) and of the
+    moving pins, and a cloth dragged or blown along moves at about that speed, so 1/2 driven^2
+    J/kg is added to the work.
     """
     finite, sum_d2, drop = _frame_sums(pos, last, free, start)
     if not finite:
@@ -99,7 +102,7 @@ def blow_up_reason(pos: np.ndarray, last: np.ndarray, free: np.ndarray, dt: floa
         return None
     ke = 0.5 * sum_d2 / (n * dt * dt)
     work = float(gravity @ drop) / n
-    bound = ENERGY_FACTOR * max(work, 0.0) + ENERGY_SLACK
+    bound = ENERGY_FACTOR * (max(work, 0.0) + 0.5 * driven * driven) + ENERGY_SLACK
     if not ke <= bound:
         return (f"kinetic energy blew up ({ke:.3g} J/kg > bound {bound:.3g} J/kg = "
                 f"{ENERGY_FACTOR:g} x gravity work + {ENERGY_SLACK:g})")
@@ -127,7 +130,23 @@ def _frame_sums(pos: np.ndarray, last: np.ndarray, free: np.ndarray, start: np.n
 
 def sim_blow_up_reason(sim: Any) -> str | None:
     """:func:`blow_up_reason` for a :class:`~clothsim.sim.simulation.Simulation`."""
-    return blow_up_reason(sim._pos, sim._last, sim.free, sim.dt, sim._gravity, sim.initial_positions.T)
+    return blow_up_reason(sim._pos, sim._last, sim.free, sim.dt, sim._gravity, sim.initial_positions.T,
+                          driven_speed(sim.scene))
+
+
+def driven_speed(scene: Scene) -> float:
+    """Bound (m/s) on the speed of what drives the cloth: the fastest wind with its gusts plus the
+    fastest moving pin."""
+    wind = max((math.hypot(*w.velocity) + w.turbulence for w in scene.winds), default=0.0)
+    motion = scene.cloth.pin_motion
+    pins = 0.0
+    if motion is not None:
+        track = motion.track()
+        pins = float(np.linalg.norm(track.velocity))
+        if track.times.shape[0] > 1:
+            steps = np.linalg.norm(np.diff(track.points, axis=0), axis=1) / np.diff(track.times)
+            pins = max(pins, float(steps.max()))
+    return wind + pins
 
 
 def blow_up_advice(scene: Scene) -> str:

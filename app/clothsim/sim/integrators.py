@@ -142,6 +142,7 @@ def _advance(sim: Any, steps: int) -> None:
     fix = has_corrections(post)
     f, phi, c = damping_factors(sim)
     dt = sim.dt
+    wind, pins = sim._kernel_args[4], sim._kernel_args[5]
     if name == "verlet":
         if not st.started:
             accumulate_forces(sim._pos, sim._forces, sim._stream, sim.mass, sim._gravity)
@@ -149,21 +150,21 @@ def _advance(sim: Any, steps: int) -> None:
             st.started = True
         sim.colliders_skipped += run_verlet_rate(steps, sim._pos, sim._last, sim._forces, sim.free, sim._blocks,
                                                  sim._stream, sim._rest, sim.nw, sim.mass,
-                                                 sim._gravity, dt, f, phi, post)
+                                                 sim._gravity, dt, f, phi, post, wind, pins)
     elif name == "symplectic_euler":
         sim.colliders_skipped += run_symplectic(steps, sim._pos, sim._last, st.vel, sim._forces, sim.free,
                                                 sim._blocks, sim._stream, sim._rest, sim.nw,
-                                                sim.mass, sim._gravity, dt, f, phi, post, fix)
+                                                sim.mass, sim._gravity, dt, f, phi, post, fix, wind, pins)
     elif name == "implicit_euler":
         # Rate damping goes into the implicit system; spec damping scales the solved velocity.
         keep_after = 1.0 if c > 0.0 else f
         st.cg_iterations += run_implicit(steps, sim._pos, sim._last, st.vel, sim._forces, sim.free, st.mask,
                                          sim._blocks, sim._stream, sim._rest, sim.nw, st.si,
                                          st.sj, st.kspr, st.jac, st.scratch, sim.mass, sim._gravity, dt, c,
-                                         keep_after, CG_TOLERANCE, CG_MAX_ITERATIONS, post, fix)
+                                         keep_after, CG_TOLERANCE, CG_MAX_ITERATIONS, post, fix, wind, pins)
     elif name == "xpbd":
         sim.colliders_skipped += run_xpbd(steps, sim._pos, sim._last, st.vel, sim.free, st.inv_mass, sim._blocks,
                                           sim._rest, sim.nw, st.si, st.sj, st.kspr, st.lam, sim._gravity,
-                                          dt, f, phi, st.iterations, post)
+                                          dt, f, phi, st.iterations, post, sim._forces, wind, pins)
     else:  # the scene validator only admits the four names above
         raise ValueError(f"unknown integrator {name!r}")

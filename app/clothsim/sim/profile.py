@@ -42,6 +42,10 @@ class Profiler:
             out["self-collision"] = "simulation.self_collision is false"
         if len(sim._spheres) + len(sim._planes) == 0:
             out["colliders"] = "scene has no sphere or plane"
+        if sim._kernel_args[4] is None:
+            out["wind"] = "scene has no wind (or only still air)"
+        if sim._kernel_args[5] is None:
+            out["moving pins"] = "cloth has no pin_motion"
         if sim._stretch_limit <= 0:
             out["provot"] = "simulation.max_stretch is null"
         if sim.pinned.any():

@@ -8,13 +8,16 @@ from ..cloth import (BENDING, BENDING_STIFFNESS_FACTOR, Springs, all_springs, en
                      pinned_mask, spring_blocks, spring_streams)
 from ..errors import SimulationBlowUp
 from ..scene import Scene, check_field
-from ..validate import check, integer
+from ..validate import At, check, integer
+from ..wind import WINDS, wind_rows
 from . import team
 from .collide import SURFACE_OFFSET
-from .frame import PASS_ALL, kernel_addresses, run_substeps
+from .frame import PASS_ALL, PASS_INTEGRATE, kernel_addresses, run_substeps
+from .aero import incidence, triangles
 from .jit import CHUNKS
+from .pinmotion import move_pins
 from .selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
-from .state import ClothState, Colliders, GridHash, SpecHash
+from .state import ClothState, Colliders, GridHash, PinMotion, SpecHash, Wind
 
 _SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID}
 _FRAMES = integer(ge=0)
@@ -28,7 +31,8 @@ class Simulation:
     ``positions`` and ``last_positions`` are (N, 3) float64 arrays updated in place (row-major:
     index = row * num_width_points + col). Parameters the course GUI lets a user change between
     frames are properties here (``ks``, ``density``, ``damping``, the ``enable_*`` flags,
-    ``gravity``, ``frames_per_sec``, ``simulation_steps``); setting one re-plans the passes.
+    ``gravity``, ``frames_per_sec``, ``simulation_steps``) and ``wind``; setting one re-plans the
+    passes.
     """
 
     def __init__(self, scene: Scene) -> None:
@@ -63,6 +67,11 @@ class Simulation:
         self._boxes = np.zeros((CHUNKS, 6))
         self._skips = np.zeros(1, dtype=np.int64)
         self._pins = np.flatnonzero(self.pinned)
+        # Time as (time at the last re-plan, substeps since): a substep's time is computed from it,
+        # not summed up, so the same run gives the same times however its substeps are grouped.
+        self._clock = np.zeros(2)
+        self._clock_dt = self.dt
+        self._tris: np.ndarray | None = None
         self._sync = team.new_sync()
         #: Members of the next frames' thread team (recovers after a failed roll call).
         self.team = team.TeamPlan()
@@ -71,6 +80,7 @@ class Simulation:
         # Extra per-run state of the non-spec integrators (e.g. velocities); None = start afresh.
         self.integrator_state: object = None
         self._replan()
+        self._place_pins()
 
     # ------------------------------------------------------------------------------------------
     # Parameters (re-plan on change)
@@ -109,6 +119,25 @@ class Simulation:
     simulation_steps = property(lambda self: self.scene.simulation.simulation_steps,
                                 lambda self, v: self._set_sim("simulation_steps", v),
                                 doc="Substeps per frame (an integer >= 1).")
+
+    @property
+    def wind(self) -> tuple:
+        """The winds (a tuple of :class:`~clothsim.wind.WindSpec`, empty for none). Set it between
+        frames to a ``wind`` object as a scene file writes it (a dict, or a list of them), a
+        ``WindSpec``, or None for no wind; it is checked with the scene loader's rule."""
+        return self.scene.winds
+
+    @wind.setter
+    def wind(self, value: object) -> None:
+        from dataclasses import replace
+
+        self.scene = replace(self.scene, winds=WINDS(value, At(None, "wind")))
+        self._replan()
+
+    @property
+    def time(self) -> float:
+        """Simulated seconds since the start (or the last :meth:`reset`)."""
+        return float(self._clock[0] + self._clock[1] * self._clock_dt)
 
     @property
     def all_springs(self) -> Springs:
@@ -186,6 +215,10 @@ class Simulation:
             h = 3.0 * cloth.height / cloth.num_height_points
             self._cell = np.array([w, h, max(w, h)])
         self._stretch_limit = -1.0 if sim.max_stretch is None else 1.0 + sim.max_stretch
+        # the clock restarts from the time reached, counting substeps of the (maybe new) length
+        self._clock[0] = self.time
+        self._clock[1] = 0.0
+        self._clock_dt = self.dt
         self._kernel_args = self._pack()
         # the member kernel's address for these groups, found on the first frame (typing the groups
         # to look it up takes ~0.36 ms: a third of a frame, if done every frame)
@@ -213,7 +246,38 @@ class Simulation:
             margin = 0.0 if self._self_mode == 0 else 1.001 * (2.0 * cloth.thickness) / steps
             col = Colliders(self.free, self._spheres, self._planes, SURFACE_OFFSET, self._box, self._sphere_on,
                             self._plane_on, self._boxes, margin)
-        return st, spec, grid, col
+        return st, spec, grid, col, self._wind_group(), self._pin_group()
+
+    def _wind_group(self) -> Wind | None:
+        rows, modes = wind_rows(self.scene.winds)
+        if rows.shape[0] == 0:  # no wind, or only still ones: no pass, the same bits as none
+            return None
+        if self._tris is None:
+            self._tris = triangles(self.nw, self.nh)
+            self._incidence = incidence(self._tris, self.nw * self.nh)
+            self._tforce = np.zeros((3, self._tris.shape[1]))
+            self._wind_scratch = np.zeros((12, self._tris.shape[1]))
+        dt = self.dt
+        return Wind(rows, modes, self._tris, *self._incidence, self._tforce, self._wind_scratch, 1.0 / dt, dt,
+                    self._clock)
+
+    def _pin_group(self) -> PinMotion | None:
+        motion = self.scene.cloth.pin_motion
+        if motion is None or self._pins.shape[0] == 0:
+            return None
+        track = motion.track()
+        return PinMotion(self._pins.astype(np.int64), np.ascontiguousarray(self.initial_positions[self._pins].T),
+                         track.times, track.points, track.velocity, self.dt, self._clock)
+
+    def _place_pins(self) -> None:
+        """At the start, the whole cloth moved by the pins' offset at time 0, at rest: the pins are
+        then at rest + offset(0) with no jump in the first substep."""
+        pm = self._kernel_args[5]
+        if pm is not None:
+            offset = np.empty(3)
+            move_pins(self._pos, self._last, pm, self.time, offset)
+            self._pos[...] = self.initial_positions.T + offset[:, None]
+            self._last[...] = self._pos
 
     # ------------------------------------------------------------------------------------------
     # Stepping
@@ -225,6 +289,8 @@ class Simulation:
         self.frame = 0
         self.colliders_skipped = 0
         self.integrator_state = None
+        self._clock[:] = 0.0
+        self._place_pins()
 
     def step(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``simulation_steps`` substeps each.
@@ -247,10 +313,12 @@ class Simulation:
         ``size``; False when the team gave the frame up half-way (the state must be restored)."""
         if not self._member_at:
             self._member_at, repel = kernel_addresses(*self._kernel_args, self._sync)
-            st, spec, grid, col = self._kernel_args
+            st, spec, *rest = self._kernel_args
             if spec is not None:
-                self._kernel_args = (st, spec._replace(repel=repel), grid, col)
+                self._kernel_args = (st, spec._replace(repel=repel), *rest)
         self.colliders_skipped += run_substeps(steps, *self._kernel_args, self._sync, size, passes, self._member_at)
+        if passes & PASS_INTEGRATE:
+            self._clock[1] += steps
         if self._sync[team.FAILED]:
             raise MemoryError("the frame kernel could not allocate its work space")
         self.team.after(self._sync, size)
@@ -263,6 +331,7 @@ class Simulation:
             from .integrators import advance
 
             advance(self, steps)
+            self._clock[1] += steps
             return
         size = self.team.size() if saved is not None else 1
         if not self.run_kernel(steps, PASS_ALL, size):
@@ -273,6 +342,7 @@ class Simulation:
         self._pos[...] = saved[0]
         self._last[...] = saved[1]
         self.integrator_state = None if saved[2] is None else saved[2].copy()
+        self._clock[:] = saved[3]
 
     def _advance_frame(self, run=None) -> None:  # noqa: ANN001
         """One frame through ``run(steps, saved)`` (default :meth:`_run`), under the blow-up guard."""
@@ -282,7 +352,7 @@ class Simulation:
 
         run = run or self._run
         state = self.integrator_state
-        saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy())
+        saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy(), self._clock.copy())
         steps = self.scene.simulation.simulation_steps
         run(steps, saved)
         if sim_blow_up_reason(self) is not None:

@@ -87,3 +87,35 @@ class Colliders(NamedTuple):
     plane_on: np.ndarray
     boxes: np.ndarray
     self_margin: float
+
+
+class Wind(NamedTuple):
+    """The winds (:mod:`clothsim.sim.aero`): their rows and gust modes (:func:`clothsim.wind.wind_rows`),
+    the mesh's triangles (3, T), each point's triangles (``start`` (N + 1,), ``incident``), the
+    per-triangle force buffer (3, T) and work space (12, T), 1/dt, dt and the clock (see
+    :class:`PinMotion`)."""
+
+    rows: np.ndarray
+    modes: np.ndarray
+    tris: np.ndarray
+    start: np.ndarray
+    incident: np.ndarray
+    tforce: np.ndarray
+    scratch: np.ndarray
+    inv_dt: float
+    dt: float
+    clock: np.ndarray
+
+
+class PinMotion(NamedTuple):
+    """Moving pins (:mod:`clothsim.sim.pinmotion`): the pinned points, their rest positions (3, P),
+    the offset's track (:class:`clothsim.motion.Track` arrays), the substep and the clock: (time at
+    the last re-plan, substeps since), so substep s of a call starts at clock[0] + (clock[1] + s) dt."""
+
+    pins: np.ndarray
+    rest: np.ndarray
+    times: np.ndarray
+    points: np.ndarray
+    velocity: np.ndarray
+    dt: float
+    clock: np.ndarray

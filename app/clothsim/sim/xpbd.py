@@ -12,9 +12,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from .aero import add_wind
 from .explicit import velocities_from_positions
 from .jit import KERNEL, EXACT
 from .passes import corrections
+from .pinmotion import move_pins, substep_time
 
 # Gauss-Seidel passes over all springs per substep.
 XPBD_ITERATIONS = 4
@@ -32,6 +34,15 @@ def predict(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, free: np.ndarray
             vel[ax, q] = v
             last[ax, q] = pos[ax, q]
             pos[ax, q] += dt * v
+
+
+@njit(**KERNEL)
+def kick(vel: np.ndarray, forces: np.ndarray, free: np.ndarray, w: np.ndarray, h: float) -> None:
+    """v += h * F / m for the free points (``w`` = 1/m)."""
+    for ax in range(3):
+        for k in range(free.shape[0]):
+            q = free[k]
+            vel[ax, q] += h * w[q] * forces[ax, q]
 
 
 @njit(**KERNEL)
@@ -72,11 +83,19 @@ def solve_constraints(pos: np.ndarray, w: np.ndarray, si: np.ndarray, sj: np.nda
 def run_xpbd(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray, free: np.ndarray, w: np.ndarray,
              blocks: np.ndarray, rest: np.ndarray, nw: int, si: np.ndarray, sj: np.ndarray, kspr: np.ndarray,
              lam: np.ndarray, gravity: np.ndarray, dt: float, f: float, phi: float, iterations: int,
-             post: tuple) -> int:
-    """``steps`` XPBD substeps plus the shared corrections; returns colliders skipped."""
+             post: tuple, forces: np.ndarray, wind: tuple | None, pins: tuple | None) -> int:
+    """``steps`` XPBD substeps plus the shared corrections; returns colliders skipped. The wind's
+    force (into ``forces``) kicks the velocities before the prediction."""
     skipped = 0
-    for _ in range(steps):
+    offset = np.empty(3)
+    for s in range(steps):
+        if wind is not None:
+            forces[:, :] = 0.0
+            add_wind(pos, last, forces, wind, substep_time(wind.clock, s, wind.dt))
+            kick(vel, forces, free, w, dt * phi)
         predict(pos, last, vel, free, gravity, dt, f, phi)
+        if pins is not None:
+            move_pins(pos, last, pins, substep_time(pins.clock, s + 1, pins.dt), offset)
         solve_constraints(pos, w, si, sj, rest, kspr, lam, dt, iterations)
         skipped += corrections(pos, last, free, blocks, rest, nw, post)
         velocities_from_positions(pos, last, vel, free, dt)

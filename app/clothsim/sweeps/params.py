@@ -250,10 +250,17 @@ def scene_json(scene: Scene) -> dict[str, Any]:
     """A run's full resolved scene (every default filled in) as scene-file JSON."""
     cloth = dataclasses.asdict(scene.cloth)
     cloth["pinned"] = [list(p) for p in scene.cloth.pinned]
+    motion = scene.cloth.pin_motion
+    if motion is None:
+        del cloth["pin_motion"]
+    else:
+        cloth["pin_motion"] = ({"velocity": list(motion.velocity)} if motion.velocity is not None else
+                               {"keyframes": [[t, list(p)] for t, p in motion.keyframes]})
     return {
         "cloth": cloth,
         "sphere": [dataclasses.asdict(s) for s in scene.spheres],
         "plane": [dataclasses.asdict(p) for p in scene.planes],
+        **({"wind": [w.as_json() for w in scene.winds]} if scene.winds else {}),
         "simulation": dataclasses.asdict(scene.simulation),
         **({"render": scene.render} if scene.render is not None else {}),
     }

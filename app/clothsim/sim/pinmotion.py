@@ -1,0 +1,53 @@
+"""Moving pins (``cloth.pin_motion``): every pinned point at its rest position plus the track's
+offset at the end of each substep, exactly (the pass runs only in a scene whose pins move).
+
+The integrators leave pinned points where they were; this pass then moves them: ``last`` keeps
+where a pinned point was at the start of the substep and ``pos`` is set to rest + offset(t + dt),
+so the Verlet velocity (x - x_last) / dt of a moving pin is its true velocity (the wind and the
+next substep's springs see it) and a pin is never more than round-off off its track: each
+position is computed from the rest position and the offset, not accumulated.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ..motion import position_at
+from .jit import CHUNKS, EXACT, KERNEL
+from .team import share
+
+# ``fastmath=False`` said explicitly: Numba compiles a callee that does not set it with its
+# caller's fast-math flags, and as the frame kernel's callee the contracted arithmetic put a pin
+# one ulp off rest + Track.at(t) (the Python evaluation the tests compare with).
+IEEE = {**EXACT, "fastmath": False}
+
+offset_at = njit(**IEEE)(position_at)
+
+
+@njit(inline="always", **KERNEL)
+def pin_chunk(pos: np.ndarray, last: np.ndarray, pm: tuple, offset: np.ndarray, c: int) -> None:
+    """Work item ``c``: the pinned points of the c-th point range to rest + ``offset``; ``last``
+    <- where they were. ``pm`` is a :class:`~clothsim.sim.state.PinMotion`."""
+    lo, hi = share(pos.shape[1], c, CHUNKS)
+    for k in range(pm.pins.shape[0]):
+        q = pm.pins[k]
+        if lo <= q < hi:
+            for ax in range(3):
+                last[ax, q] = pos[ax, q]
+                pos[ax, q] = pm.rest[ax, k] + offset[ax]
+
+
+@njit(**KERNEL)
+def move_pins(pos: np.ndarray, last: np.ndarray, pm: tuple, t: float, offset: np.ndarray) -> None:
+    """Every pinned point to rest + offset(t) (the other integrators' pass; ``offset`` is (3,) work
+    space)."""
+    offset_at(pm.times, pm.points, pm.velocity, t, offset)
+    for c in range(CHUNKS):
+        pin_chunk(pos, last, pm, offset, c)
+
+
+@njit(**IEEE)
+def substep_time(clock: np.ndarray, step: int, dt: float) -> float:
+    """Time (s) at the start of substep ``step`` of a call: clock = (base time, substeps since)."""
+    return clock[0] + (clock[1] + step) * dt
