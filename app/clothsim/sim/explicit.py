@@ -49,10 +49,10 @@ def run_verlet_rate(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.nd
                     mass: float, gravity: np.ndarray, dt: float, f: float, phi: float, post: tuple) -> int:
     """``steps`` substeps of rate-damped Verlet plus the shared corrections; returns colliders skipped."""
     skipped = 0
-    for _ in range(steps):
+    for substep in range(steps):
         accumulate_forces(pos, forces, stream, mass, gravity)
         verlet_rate_step(pos, last, forces, free, 1.0 / mass, dt, f, phi)
-        skipped += corrections(pos, last, free, blocks, rest, nw, post)
+        skipped += corrections(pos, last, free, blocks, rest, nw, post, substep)
     return skipped
 
 
@@ -88,10 +88,10 @@ def run_symplectic(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarra
                    post: tuple, fix_velocity: bool) -> int:
     """``steps`` substeps of symplectic Euler plus the shared corrections; returns colliders skipped."""
     skipped = 0
-    for _ in range(steps):
+    for substep in range(steps):
         accumulate_forces(pos, forces, stream, mass, gravity)
         symplectic_step(pos, last, vel, forces, free, 1.0 / mass, dt, f, phi)
-        skipped += corrections(pos, last, free, blocks, rest, nw, post)
+        skipped += corrections(pos, last, free, blocks, rest, nw, post, substep)
         if fix_velocity:
             velocities_from_positions(pos, last, vel, free, dt)
     return skipped

@@ -176,11 +176,11 @@ def run_implicit(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray,
                  tol: float, max_iter: int, post: tuple, fix_velocity: bool) -> int:
     """``steps`` implicit substeps plus the shared corrections; returns total CG iterations."""
     total = 0
-    for _ in range(steps):
+    for substep in range(steps):
         accumulate_forces(pos, forces, stream, mass, gravity)
         total += implicit_update(pos, last, vel, forces, free, mask, si, sj, rest, kspr, jac, scratch, mass, dt,
                                  c, keep_after, tol, max_iter)
-        corrections(pos, last, free, blocks, rest, nw, post)
+        corrections(pos, last, free, blocks, rest, nw, post, substep)
         if fix_velocity:
             velocities_from_positions(pos, last, vel, free, dt)
     return total

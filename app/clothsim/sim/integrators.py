@@ -24,7 +24,6 @@ from typing import Any
 import numba
 import numpy as np
 
-from .collide import SURFACE_OFFSET
 from .explicit import run_symplectic, run_verlet_rate, verlet_start
 from .forces import accumulate_forces
 from .implicit import CG_MAX_ITERATIONS, CG_TOLERANCE, run_implicit
@@ -105,8 +104,7 @@ class IntegratorState:
 def post_args(sim: Any) -> tuple:
     """The correction passes' arguments, packed for :func:`clothsim.sim.passes.corrections`."""
     return (sim.pinned, sim._self_mode, sim.scene.cloth.thickness, sim.scene.simulation.simulation_steps,
-            sim._cell, sim._keys, sim._slots, sim._table, sim._order, sim._stretch_limit, sim._spheres,
-            sim._planes, SURFACE_OFFSET, sim._box, sim._sphere_on, sim._plane_on)
+            sim._cell, sim._keys, sim._slots, sim._table, sim._order, sim._stretch_limit, sim._kernel_args[3])
 
 
 def state_of(sim: Any) -> IntegratorState:

@@ -75,9 +75,9 @@ def run_xpbd(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray, fre
              post: tuple) -> int:
     """``steps`` XPBD substeps plus the shared corrections; returns colliders skipped."""
     skipped = 0
-    for _ in range(steps):
+    for substep in range(steps):
         predict(pos, last, vel, free, gravity, dt, f, phi)
         solve_constraints(pos, w, si, sj, rest, kspr, lam, dt, iterations)
-        skipped += corrections(pos, last, free, blocks, rest, nw, post)
+        skipped += corrections(pos, last, free, blocks, rest, nw, post, substep)
         velocities_from_positions(pos, last, vel, free, dt)
     return skipped

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ClothsimError, FieldError
-from ..scene import Scene, scene_from_dict
+from ..scene import Scene, collider_json, scene_from_dict
 from ..validate import SceneWarning, shown
 
 __all__ = ["Distribution", "Run", "build_scene", "expand", "parse_set", "parse_values", "run_id",
@@ -252,8 +252,10 @@ def scene_json(scene: Scene) -> dict[str, Any]:
     cloth["pinned"] = [list(p) for p in scene.cloth.pinned]
     return {
         "cloth": cloth,
-        "sphere": [dataclasses.asdict(s) for s in scene.spheres],
-        "plane": [dataclasses.asdict(p) for p in scene.planes],
+        "sphere": [collider_json(s) for s in scene.spheres],
+        "plane": [collider_json(p) for p in scene.planes],
+        **({"capsule": [collider_json(c) for c in scene.capsules]} if scene.capsules else {}),
+        **({"box": [collider_json(b) for b in scene.boxes]} if scene.boxes else {}),
         "simulation": dataclasses.asdict(scene.simulation),
         **({"render": scene.render} if scene.render is not None else {}),
     }
