@@ -212,7 +212,7 @@ def collide_reachable(pos: np.ndarray, last: np.ndarray, col: tuple, motion: tup
 
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
-            col: tuple | None, sync: np.ndarray, passes: int) -> None:
+            col: tuple | None, mov: tuple | None, sync: np.ndarray, passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes.
 
     Returns early, with the state half-way through a substep, when a barrier reports that the
@@ -253,7 +253,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             cuboid_on = flags_for(col.cuboids)
         # Moving colliders: member 0 poses them at the start of the collider pass, behind one
         # more barrier (the pass reads the poses right after).
-        posing = moving(col.motion)
+        posing = moving(mov)
         # The members' boxes are taken right after Verlet, before self-collision, which moves no
         # point by dist / sim_steps or more (an average of pushes each shorter than dist, over
         # sim_steps): widened by that, the box still bounds the cloth the colliders see, so
@@ -337,7 +337,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             if colliders:
                 if posing:
                     if member == 0:
-                        update_poses(col.motion, col.spheres, col.planes, col.capsules, col.cuboids, substep)
+                        update_poses(mov, col.spheres, col.planes, col.capsules, col.cuboids, substep)
                     gen = barrier(sync, size, gen)
                     if gen < 0:
                         return
@@ -351,12 +351,12 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     if gen < 0:
                         return
                     merge_bounds(col.boxes, 0.0, box)
-                skipped = reach_colliders(box, col, sphere_on, plane_on, capsule_on, cuboid_on, col.motion,
-                                          col.capsules, col.cuboids)
+                skipped = reach_colliders(box, col, sphere_on, plane_on, capsule_on, cuboid_on, mov, col.capsules,
+                                          col.cuboids)
                 if member == 0:
                     st.skips[0] += skipped
                 for c in range(lo, hi):
-                    collide_part(pos, last, col, sphere_on, plane_on, capsule_on, cuboid_on, col.motion, col.capsules,
+                    collide_part(pos, last, col, sphere_on, plane_on, capsule_on, cuboid_on, mov, col.capsules,
                                  col.cuboids, c)
                 gen = barrier(sync, size, gen)
                 if gen < 0:
@@ -395,29 +395,30 @@ def _addresses(argtypes: tuple) -> tuple[int, int]:
     def meanwhile() -> None:
         if repel is not None:
             repel_slots.compile(repel)
-        run_substeps.compile((i64, *argtypes[3:8], i64, i64, i64))
+        run_substeps.compile((i64, *argtypes[3:9], i64, i64, i64))
         side_kernels()
 
     compile_elsewhere(_member, argtypes, meanwhile)
     return native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel)
 
 
-def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
+def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None, mov: tuple | None,
                      sync: np.ndarray) -> tuple[int, int]:
     """Addresses of :func:`_member` compiled for these state groups and of the
     :func:`~clothsim.sim.selfcollide.repel_slots` it calls (0 without the spec's hash), compiled or
     loaded from the cache on first use; the second goes into ``SpecHash.repel``."""
     i64 = types.int64
-    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, sync)), i64))
+    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, mov, sync)), i64))
 
 
 @njit(**PARALLEL)
 def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
-                 sync: np.ndarray, size: int, passes: int, member: int) -> int:
+                 mov: tuple | None, sync: np.ndarray, size: int, passes: int, member: int) -> int:
     """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
 
     ``st``, ``spec``, ``grid`` and ``col`` are the named tuples of :mod:`clothsim.sim.state`
-    (the last three ``None`` for a pass the scene does not use). ``sync`` is
+    and ``mov`` the tracks of moving colliders (:class:`clothsim.sim.moving.Motion`); all but
+    ``st`` are ``None`` for a pass the scene does not use. ``sync`` is
     :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
     :mod:`clothsim.sim.team`); the result does not depend on it. After the call
     ``sync[team.ABORT]`` set means the frame was given up half-way (restore and run it alone).
@@ -435,7 +436,7 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
             me = 0
             if working == size:
                 me = np.int64(m)
-            if call_native(member, (me, working, steps, st, spec, grid, col, sync, passes)) != 0:
+            if call_native(member, (me, working, steps, st, spec, grid, col, mov, sync, passes)) != 0:
                 sync[FAILED] = 1
                 atomic_cas(sync, ABORT, 0, 1)
     return st.skips[0]

@@ -84,12 +84,14 @@ def stability_warning(scene: Scene) -> str | None:
 
 
 def blow_up_reason(pos: np.ndarray, last: np.ndarray, free: np.ndarray, dt: float, gravity: np.ndarray,
-                   start: np.ndarray) -> str | None:
+                   start: np.ndarray, carried: float = 0.0) -> str | None:
     """What blew up, or None. ``pos``/``last``/``start`` are (3, N), ``start`` the initial positions.
 
     Energy test: rest lengths are measured from the initial grid, so the cloth starts with no
     elastic energy and (static colliders and damping only remove energy) its kinetic energy can
     only come from the work gravity has done, g . (drop of the free points' centre of mass).
+    Moving colliders also give the cloth their speed: ``carried`` (J/kg) is half the square of the
+    fastest one's top speed, added to that work.
     """
     finite, sum_d2, drop = _frame_sums(pos, last, free, start)
     if not finite:
@@ -99,7 +101,7 @@ def blow_up_reason(pos: np.ndarray, last: np.ndarray, free: np.ndarray, dt: floa
         return None
     ke = 0.5 * sum_d2 / (n * dt * dt)
     work = float(gravity @ drop) / n
-    bound = ENERGY_FACTOR * max(work, 0.0) + ENERGY_SLACK
+    bound = ENERGY_FACTOR * (max(work, 0.0) + carried) + ENERGY_SLACK
     if not ke <= bound:
         return (f"kinetic energy blew up ({ke:.3g} J/kg > bound {bound:.3g} J/kg = "
                 f"{ENERGY_FACTOR:g} x gravity work + {ENERGY_SLACK:g})")
@@ -127,7 +129,8 @@ def _frame_sums(pos: np.ndarray, last: np.ndarray, free: np.ndarray, start: np.n
 
 def sim_blow_up_reason(sim: Any) -> str | None:
     """:func:`blow_up_reason` for a :class:`~clothsim.sim.simulation.Simulation`."""
-    return blow_up_reason(sim._pos, sim._last, sim.free, sim.dt, sim._gravity, sim.initial_positions.T)
+    return blow_up_reason(sim._pos, sim._last, sim.free, sim.dt, sim._gravity, sim.initial_positions.T,
+                          0.5 * sim.collider_top_speed ** 2)
 
 
 def blow_up_advice(scene: Scene) -> str:

@@ -104,7 +104,7 @@ class IntegratorState:
 def post_args(sim: Any) -> tuple:
     """The correction passes' arguments, packed for :func:`clothsim.sim.passes.corrections`."""
     return (sim.pinned, sim._self_mode, sim.scene.cloth.thickness, sim.scene.simulation.simulation_steps,
-            sim._cell, sim._keys, sim._slots, sim._table, sim._order, sim._stretch_limit, sim._kernel_args[3])
+            sim._cell, sim._keys, sim._slots, sim._table, sim._order, sim._stretch_limit, *sim._kernel_args[3:5])
 
 
 def state_of(sim: Any) -> IntegratorState:

@@ -82,6 +82,20 @@ def pack_motion(scene: Any) -> Motion | None:
                   np.zeros((len(scene.spheres), 3)), np.zeros((len(scene.planes), 3)))
 
 
+def top_speed(scene: Any) -> float:
+    """The highest speed (m/s) any of ``scene``'s colliders ever moves at (0 when none moves)."""
+    top = 0.0
+    for spec in scene.colliders:
+        if spec.motion is None:
+            continue
+        track = spec.motion.track(spec.anchor)
+        top = max(top, float(np.linalg.norm(track.velocity)))
+        if len(track.times) > 1:
+            steps = np.linalg.norm(np.diff(track.points, axis=0), axis=1) / np.diff(track.times)
+            top = max(top, float(steps.max()))
+    return top
+
+
 def shift(spec: Any, t: float) -> np.ndarray:
     """How far a collider's ``motion`` has moved it from its scene pose at time ``t``, (3,) (zero
     for a static one): the translation to draw or export it with."""

@@ -24,26 +24,26 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
     returns the colliders skipped.
 
     ``post`` = (pinned, self_mode, thickness, sim_steps, cell, keys, slots, start, order,
-    stretch_limit, colliders) with ``colliders`` the :class:`~clothsim.sim.state.Colliders` group
-    or None.
+    stretch_limit, colliders, motion): the :class:`~clothsim.sim.state.Colliders` group and the
+    :class:`~clothsim.sim.moving.Motion` group, each None when the scene has none.
     """
-    (pinned, self_mode, thickness, sim_steps, cell, keys, slots, start, order, stretch_limit, col) = post
+    (pinned, self_mode, thickness, sim_steps, cell, keys, slots, start, order, stretch_limit, col, mov) = post
     skipped = 0
     if self_mode != 0:
         self_collide(pos, free, thickness, sim_steps, self_mode, cell[0], cell[1], cell[2], keys, slots, start,
                      order)
-    skipped += collide_group(pos, last, col, substep)
+    skipped += collide_group(pos, last, col, mov, substep)
     if stretch_limit > 0.0:
         provot(pos, pinned, blocks, rest, nw, stretch_limit)
     return skipped
 
 
 @njit(**EXACT)
-def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, substep: int) -> int:
+def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, mov: tuple | None, substep: int) -> int:
     """The collider pass when the scene has colliders (``col`` is not None); returns those skipped."""
     if col is None:
         return 0
-    return collide_reachable(pos, last, col, col.motion, col.capsules, col.cuboids, substep)
+    return collide_reachable(pos, last, col, mov, col.capsules, col.cuboids, substep)
 
 
 def has_corrections(post: tuple) -> bool:

@@ -13,7 +13,7 @@ from . import team
 from .collide import SURFACE_OFFSET
 from .frame import PASS_ALL, kernel_addresses, run_substeps
 from .jit import CHUNKS
-from .moving import pack_motion
+from .moving import pack_motion, top_speed
 from .shapes import collider_rows
 from .selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
 from .state import ClothState, Colliders, GridHash, SpecHash
@@ -57,6 +57,8 @@ class Simulation:
         self._capsule_on = None if self._capsules is None else np.zeros(len(self._capsules), dtype=np.bool_)
         self._cuboid_on = None if self._cuboids is None else np.zeros(len(self._cuboids), dtype=np.bool_)
         self._motion = pack_motion(scene)
+        #: Top speed of the moving colliders (m/s): the blow-up guard allows the energy they give.
+        self.collider_top_speed = top_speed(scene)
         #: Simulated seconds since the start (moving colliders are posed from it).
         self.time = 0.0
         m = table_size(n)
@@ -221,8 +223,8 @@ class Simulation:
             margin = 0.0 if self._self_mode == 0 else 1.001 * (2.0 * cloth.thickness) / steps
             col = Colliders(self.free, self._spheres, self._planes, SURFACE_OFFSET, self._box, self._sphere_on,
                             self._plane_on, self._boxes, margin, self._capsules, self._cuboids, self._capsule_on,
-                            self._cuboid_on, self._motion)
-        return st, spec, grid, col
+                            self._cuboid_on)
+        return st, spec, grid, col, self._motion
 
     @property
     def n_colliders(self) -> int:
@@ -273,9 +275,9 @@ class Simulation:
         self._start_clock(substep)
         if not self._member_at:
             self._member_at, repel = kernel_addresses(*self._kernel_args, self._sync)
-            st, spec, grid, col = self._kernel_args
+            st, spec, grid, col, mov = self._kernel_args
             if spec is not None:
-                self._kernel_args = (st, spec._replace(repel=repel), grid, col)
+                self._kernel_args = (st, spec._replace(repel=repel), grid, col, mov)
         self.colliders_skipped += run_substeps(steps, *self._kernel_args, self._sync, size, passes, self._member_at)
         if self._sync[team.FAILED]:
             raise MemoryError("the frame kernel could not allocate its work space")
