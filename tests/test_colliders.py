@@ -291,7 +291,10 @@ def test_export_writes_capsules_and_boxes_and_animates_the_moving_ones(tmp_path)
     assert op.Get(pxr.Usd.TimeCode(60))[0] == pytest.approx(0.5 * (60 / 90 - 0.3))
     capsule = pxr.UsdGeom.Mesh(stage.GetPrimAtPath("/World/colliders/capsule_0"))
     assert not capsule.GetOrderedXformOps()  # static: written where it is
-    assert np.allclose(np.array(capsule.GetPointsAttr().Get()).mean(axis=0), [-5.0, 0.5, 0.0], atol=1e-3)
+    points = np.array(capsule.GetPointsAttr().Get())
+    # the segment (-5, 0, 0)-(-5, 1, 0) with radius 0.1
+    assert np.allclose(points.min(axis=0), [-5.1, -0.1, -0.1], atol=1e-6)
+    assert np.allclose(points.max(axis=0), [-4.9, 1.1, 0.1], atol=1e-6)
 
     clothsim.export(_on_a_moving_box(0.3), str(tmp_path / "obj/"), frames=60, every=30)
     static = (tmp_path / "obj" / "colliders.obj").read_text()
