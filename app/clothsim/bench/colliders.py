@@ -15,8 +15,9 @@ import statistics
 import time
 from collections.abc import Callable
 
+from typing import Any
+
 from ..scene import Scene, load_scene
-from ..sim import Simulation
 from ..validate import check, integer
 
 SCENES = ("capsule", "tablecloth", "curtain")
@@ -62,7 +63,7 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _timer(sim: Simulation, frames: int) -> Callable[[], float]:
+def _timer(sim: Any, frames: int) -> Callable[[], float]:
     def once() -> float:
         t0 = time.perf_counter()
         sim.step(frames)
@@ -72,6 +73,8 @@ def _timer(sim: Simulation, frames: int) -> Callable[[], float]:
 
 def run(args: argparse.Namespace) -> int:
     """Print the table."""
+    from ..sim import Simulation  # only when it runs: building the parser loads no Numba
+
     for flag, value, low in (("--frames", args.frames, 1), ("--repeats", args.repeats, 1),
                              ("--warmup", args.warmup, 0)):
         check(integer(ge=low), value, flag)
