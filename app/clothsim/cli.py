@@ -13,7 +13,8 @@ from .errors import ClothsimError
 
 EPILOG = """\
 scenes: a path to a course scene file (JSON with cloth/sphere/plane), or the bare name (no / and
-no .json) of a bundled scene: pinned2, pinned4, sphere, plane, selfCollision.
+no .json) of a bundled scene: pinned2, pinned4, sphere, plane, selfCollision, capsule, curtain,
+tablecloth.
 
 examples:
   clothsim simulate scenes/sphere.json --frames 180 --out sphere.npz
@@ -63,13 +64,14 @@ def build_parser() -> argparse.ArgumentParser:
     from .serve.command import add_parser as add_serve_parser
 
     add_serve_parser(sub)
-    bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling, sweep",
+    bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling, sweep, colliders, serve",
                            description="Benchmarks that print figures measured on this machine.")
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
     bench.set_defaults(func=lambda args: (bench.print_help(), 2)[1])
 
     from . import compiling
     from .bench import accuracy, scaling, speed, stability
+    from .bench import colliders as bench_colliders
     from .bench import compile as bench_compile
     from .bench import serve as bench_serve
     from .bench import sweep as bench_sweep
@@ -77,7 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     speed.add_parser(bench_sub)
     add_render_parsers(sub, bench_sub)
-    for module in (accuracy, stability, scaling, bench_compile, bench_sweep, bench_serve):
+    for module in (accuracy, stability, scaling, bench_compile, bench_sweep, bench_serve, bench_colliders):
         module.add_parser(bench_sub)
     compiling.add_parser(sub)
     return parser

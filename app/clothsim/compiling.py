@@ -121,7 +121,8 @@ def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet"
 def work_items() -> list[tuple[str, Callable[[], None]]]:
     """Everything ``clothsim compile`` compiles: each frame-kernel plan (self-collision mode x
     colliders; wind and moving pins with the spec's self-collision, as the bundled ``flag`` uses),
-    each other integrator, the rest detector and the renderer's mesh kernel."""
+    the plans of the bundled capsule, box and moving-collider scenes, each other integrator, the
+    rest detector and the renderer's mesh kernel."""
     from .sim import Simulation
 
     def step(scene) -> Callable[[], None]:  # noqa: ANN001
@@ -134,6 +135,12 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
     items += [(f"integrator {name}", step(_tiny_scene("spec", True, name)))
               for name in ("symplectic_euler", "implicit_euler", "xpbd")]
     items.append(("verlet, rate damping", step(_tiny_scene("spec", True, "verlet", "rate"))))
+    # the bundled scenes with capsules, boxes and moving colliders (each kind present or absent,
+    # moving or not, is a plan of its own: these are the ones shipped)
+    from .scene import load_scene
+
+    items += [(f"frame kernel: bundled scene {name}", step(load_scene(name))) for name in ("capsule", "tablecloth",
+                                                                                          "curtain")]
 
     items.append(("guard, rest detector, render mesh", side_kernels))
     return items

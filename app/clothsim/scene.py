@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -67,20 +67,75 @@ class ClothSpec:
 
 @dataclass(frozen=True)
 class SphereSpec:
-    """A static sphere collider."""
+    """A sphere collider; ``motion`` (optional) moves its origin."""
 
     origin: tuple[float, float, float]
     radius: float
     friction: float
+    motion: MotionSpec | None = None
+
+    @property
+    def anchor(self) -> tuple[float, float, float]:
+        """The position a ``motion`` keyframe gives: the origin."""
+        return self.origin
 
 
 @dataclass(frozen=True)
 class PlaneSpec:
-    """A static plane collider; ``normal`` is stored normalised."""
+    """A plane collider; ``normal`` is stored normalised; ``motion`` (optional) moves its point."""
 
     point: tuple[float, float, float]
     normal: tuple[float, float, float]
     friction: float
+    motion: MotionSpec | None = None
+
+    @property
+    def anchor(self) -> tuple[float, float, float]:
+        """The position a ``motion`` keyframe gives: the plane's point."""
+        return self.point
+
+
+@dataclass(frozen=True)
+class CapsuleSpec:
+    """A capsule collider: the points within ``radius`` of the segment a-b. ``motion`` (optional)
+    moves the segment rigidly: a keyframe gives the position of its midpoint."""
+
+    a: tuple[float, float, float]
+    b: tuple[float, float, float]
+    radius: float
+    friction: float
+    motion: MotionSpec | None = None
+
+    @property
+    def anchor(self) -> tuple[float, float, float]:
+        """The segment's midpoint (what a ``motion`` keyframe places)."""
+        return tuple(0.5 * (p + q) for p, q in zip(self.a, self.b))  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class BoxSpec:
+    """An oriented box collider: ``center``, ``half_extents`` along its own axes and ``rotation``
+    in degrees about x, y, z, applied as R = Rz . Ry . Rx (x first, right-handed). ``motion``
+    (optional) moves its center; the box does not turn."""
+
+    center: tuple[float, float, float]
+    half_extents: tuple[float, float, float]
+    rotation: tuple[float, float, float]
+    friction: float
+    motion: MotionSpec | None = None
+
+    @property
+    def anchor(self) -> tuple[float, float, float]:
+        """The position a ``motion`` keyframe gives: the center."""
+        return self.center
+
+    def matrix(self) -> tuple[tuple[float, float, float], ...]:
+        """R = Rz . Ry . Rx as three rows: box axes to world (column k is the box's k-th axis)."""
+        rx, ry, rz = (math.radians(a) for a in self.rotation)
+        cx, sx, cy, sy, cz, sz = math.cos(rx), math.sin(rx), math.cos(ry), math.sin(ry), math.cos(rz), math.sin(rz)
+        return ((cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx),
+                (sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx),
+                (-sy, cy * sx, cy * cx))
 
 
 @dataclass(frozen=True)
@@ -106,10 +161,22 @@ class Scene:
     cloth: ClothSpec
     spheres: tuple[SphereSpec, ...] = ()
     planes: tuple[PlaneSpec, ...] = ()
+    capsules: tuple[CapsuleSpec, ...] = ()
+    boxes: tuple[BoxSpec, ...] = ()
     winds: tuple[WindSpec, ...] = ()
     simulation: SimulationSpec = field(default_factory=SimulationSpec)
     render: dict[str, Any] | None = None
     path: str = "<scene>"
+
+    @property
+    def colliders(self) -> tuple[SphereSpec | PlaneSpec | CapsuleSpec | BoxSpec, ...]:
+        """Every collider, kind by kind (spheres, planes, capsules, boxes)."""
+        return (*self.spheres, *self.planes, *self.capsules, *self.boxes)
+
+    @property
+    def moving(self) -> bool:
+        """True when any collider carries a ``motion``."""
+        return any(c.motion is not None for c in self.colliders)
 
     def with_cloth(self, **changes: Any) -> "Scene":
         """A copy with some cloth fields replaced (no re-validation)."""
@@ -197,8 +264,20 @@ def scene_from_dict(data: Any, path: str = "<scene>") -> Scene:
     values = SCENE(data, V.At(path))
     cloth = ClothSpec(**values["cloth"])
     _check_memory(cloth, values["simulation"], path)
-    return Scene(cloth=cloth, spheres=values["spheres"], planes=values["planes"], winds=values["winds"],
-                 simulation=values["simulation"], render=values["render"], path=path)
+    return Scene(cloth=cloth, spheres=values["spheres"], planes=values["planes"], capsules=values["capsules"],
+                 boxes=values["boxes"], winds=values["winds"], simulation=values["simulation"],
+                 render=values["render"], path=path)
+
+
+def collider_json(spec: SphereSpec | PlaneSpec | CapsuleSpec | BoxSpec) -> dict[str, Any]:
+    """A collider as scene-file JSON (what loads back to the same spec)."""
+    out: dict[str, Any] = {k: list(v) if isinstance(v, tuple) else v
+                           for k, v in ((f.name, getattr(spec, f.name)) for f in fields(spec)) if k != "motion"}
+    motion = spec.motion
+    if motion is not None:
+        out["motion"] = ({"velocity": list(motion.velocity)} if motion.velocity is not None
+                         else {"keyframes": [[t, list(p)] for t, p in motion.keyframes]})
+    return out
 
 
 def check_field(section: str, name: str, value: Any) -> Any:
@@ -283,16 +362,39 @@ CLOTH = V.record({
     "pin_motion": V.Field(depends=_pin_motion, default=None),
 })
 
+# Collider sizes: positive and bounded like the cloth's lengths, so that a collider's bounding box
+# and the sub-sampling step derived from its smallest size stay finite and non-zero.
+_SIZE = V.number(ge=MIN_LENGTH, le=MAX_LENGTH)
+_ANGLE = V.number(ge=-36000.0, le=36000.0)
+
 SPHERE = V.record({
     "origin": V.required(V.vec3()),
     "radius": V.required(V.number(gt=0.0)),
     "friction": V.required(_FRICTION),
+    "motion": V.optional(MOTION),
 })
 
 PLANE = V.record({
     "point": V.required(V.vec3()),
     "normal": V.required(V.then(V.vec3(nonzero=True), _unit)),
     "friction": V.required(_FRICTION),
+    "motion": V.optional(MOTION),
+})
+
+CAPSULE = V.record({
+    "a": V.required(V.vec3()),
+    "b": V.required(V.vec3()),
+    "radius": V.required(_SIZE),
+    "friction": V.required(_FRICTION),
+    "motion": V.optional(MOTION),
+})
+
+BOX = V.record({
+    "center": V.required(V.vec3()),
+    "half_extents": V.required(V.vec3(_SIZE)),
+    "rotation": V.default(V.vec3(_ANGLE), (0.0, 0.0, 0.0)),
+    "friction": V.required(_FRICTION),
+    "motion": V.optional(MOTION),
 })
 
 _SIM_DEFAULTS = SimulationSpec()
@@ -328,10 +430,12 @@ SCENE = V.record({
     "cloth": V.required(CLOTH),
     "sphere": V.default(V.one_or_many(V.then(SPHERE, lambda v, at: SphereSpec(**v))), (), dest="spheres"),
     "plane": V.default(V.one_or_many(V.then(PLANE, lambda v, at: PlaneSpec(**v))), (), dest="planes"),
+    "capsule": V.default(V.one_or_many(V.then(CAPSULE, lambda v, at: CapsuleSpec(**v))), (), dest="capsules"),
+    "box": V.default(V.one_or_many(V.then(BOX, lambda v, at: BoxSpec(**v))), (), dest="boxes"),
     "wind": V.default(WINDS, (), dest="winds"),
     "simulation": V.default(_simulation, _SIM_DEFAULTS, dest="simulation"),
     "render": V.default(_render, None),
-}, unknown="unknown top-level object (expected one of: cloth, sphere, plane, wind, simulation, render)")
+}, unknown="unknown top-level object (expected one of: cloth, sphere, plane, capsule, box, wind, simulation, render)")
 
 
 # ----------------------------------------------------------------------------------------------

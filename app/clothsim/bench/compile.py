@@ -24,6 +24,8 @@ COMMANDS: dict[str, list[str]] = {
     "grid": ["simulate", "pinned2", "--self-collision", "grid", "--frames", "10", "--out", "{tmp}/s.npz"],
     "xpbd": ["simulate", "pinned2", "--integrator", "xpbd", "--frames", "10", "--out", "{tmp}/s.npz"],
     "flag": ["simulate", "flag", "--frames", "10", "--out", "{tmp}/s.npz"],
+    "capsule": ["simulate", "capsule", "--frames", "10", "--out", "{tmp}/s.npz"],
+    "tablecloth": ["simulate", "tablecloth", "--frames", "10", "--out", "{tmp}/s.npz"],
 }
 _RUNNER = ("import sys; from clothsim.compiling import record_command; "
            "sys.exit(record_command(sys.argv[1], sys.argv[2:]))")

@@ -118,7 +118,7 @@ def _write(sim: Simulation, fmt: str, out: str | os.PathLike[str], frames: int, 
 
         def emit() -> None:
             positions = sim.positions
-            writer.frame(sim.frame, positions.astype(np.float32), normals(positions))
+            writer.frame(sim.frame, positions.astype(np.float32), normals(positions), sim.time)
 
         emit()
         with progress_bar(frames, "export", show=progress) as bar:

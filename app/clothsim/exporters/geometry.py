@@ -7,19 +7,22 @@ the y index, and area-weighted normals from the same compiled kernel. Nothing he
 Colliders become :class:`Collider` records. Each kind of collider is one function in
 :data:`COLLIDER_KINDS` that turns a scene into records; a writer handles every record through its
 polygon mesh (world space) and may write a primitive it knows natively instead (a USD sphere).
-Another kind of collider is one more function in that tuple; one that moves would add its
-transforms over time to the record.
+Another kind of collider is one more function in that tuple. A collider with a ``motion`` keeps
+its scene pose in the record and its spec in ``moving``: a writer translates it by
+:func:`clothsim.sim.moving.shift` at each exported frame's time.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ..render import mesh as render_mesh
 from ..scene import Scene
+from ..sim.moving import shift
 
 #: Rings and segments of a sphere written as polygons (the renderer's default resolution).
 SPHERE_RESOLUTION = (40, 40)
@@ -49,6 +52,11 @@ class Collider:
     name: str
     mesh: MeshData
     sphere: tuple[tuple[float, float, float], float] | None = None
+    moving: Any = None
+
+    def offset(self, t: float) -> np.ndarray:
+        """How far the collider has moved from the record's pose at time ``t`` (s), (3,)."""
+        return np.zeros(3) if self.moving is None else shift(self.moving, t)
 
 
 # -- cloth ---------------------------------------------------------------------------------------
@@ -85,7 +93,8 @@ def _spheres(scene: Scene) -> Iterator[Collider]:
         points = (verts[:, 0:3].astype(np.float64) * sphere.radius + centre).astype(np.float32)
         mesh = MeshData(points=points, normals=np.ascontiguousarray(verts[:, 3:6]),
                         uvs=np.ascontiguousarray(verts[:, 9:11]), faces=idx.astype(np.int64).reshape(-1, 3))
-        yield Collider(f"sphere_{k}", mesh, sphere=(tuple(float(c) for c in sphere.origin), float(sphere.radius)))
+        yield Collider(f"sphere_{k}", mesh, sphere=(tuple(float(c) for c in sphere.origin), float(sphere.radius)),
+                       moving=sphere if sphere.motion is not None else None)
 
 
 def _planes(scene: Scene) -> Iterator[Collider]:
@@ -94,11 +103,28 @@ def _planes(scene: Scene) -> Iterator[Collider]:
         # plane_mesh's corners go round the square counter-clockwise seen from the normal's side.
         mesh = MeshData(points=np.ascontiguousarray(verts[:, 0:3]), normals=np.ascontiguousarray(verts[:, 3:6]),
                         uvs=np.ascontiguousarray(verts[:, 9:11]), faces=np.array([[0, 1, 2, 3]], dtype=np.int64))
-        yield Collider(f"plane_{k}", mesh)
+        yield Collider(f"plane_{k}", mesh, moving=plane if plane.motion is not None else None)
+
+
+def _triangles(verts: np.ndarray, idx: np.ndarray) -> MeshData:
+    return MeshData(points=np.ascontiguousarray(verts[:, 0:3]), normals=np.ascontiguousarray(verts[:, 3:6]),
+                    uvs=np.ascontiguousarray(verts[:, 9:11]), faces=idx.astype(np.int64).reshape(-1, 3))
+
+
+def _capsules(scene: Scene) -> Iterator[Collider]:
+    for k, capsule in enumerate(scene.capsules):
+        verts, idx = render_mesh.capsule_mesh(capsule.a, capsule.b, capsule.radius, *SPHERE_RESOLUTION)
+        yield Collider(f"capsule_{k}", _triangles(verts, idx), moving=capsule if capsule.motion is not None else None)
+
+
+def _boxes(scene: Scene) -> Iterator[Collider]:
+    for k, box in enumerate(scene.boxes):
+        verts, idx = render_mesh.box_mesh(box.center, box.half_extents, box.matrix())
+        yield Collider(f"box_{k}", _triangles(verts, idx), moving=box if box.motion is not None else None)
 
 
 #: One function per kind of collider, in the order they are written.
-COLLIDER_KINDS: tuple[Callable[[Scene], Iterator[Collider]], ...] = (_spheres, _planes)
+COLLIDER_KINDS: tuple[Callable[[Scene], Iterator[Collider]], ...] = (_spheres, _planes, _capsules, _boxes)
 
 
 def colliders(scene: Scene) -> list[Collider]:

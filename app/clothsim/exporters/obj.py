@@ -10,6 +10,7 @@ date or path, so the same scene and seed give the same bytes.
 from __future__ import annotations
 
 import re
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -61,16 +62,23 @@ class ObjSequenceWriter:
         # The same in every frame: formatted once.
         self._uv_text = _rows("vt", uvs)
         self._face_text = "s off\n" + _faces(faces, 0)
-        self._colliders = colliders
+        self._colliders = [c for c in colliders if c.moving is None]
+        self._moving = [c for c in colliders if c.moving is not None]
 
-    def frame(self, frame: int, points: np.ndarray, normals: np.ndarray) -> None:
-        """Write the cloth at ``frame``: positions and normals (N, 3), float32."""
-        text = "".join((f"# clothsim {__version__}: cloth at frame {frame} ({self.nw} x {self.nh} points)\n",
-                        "o cloth\n", _rows("v", points), self._uv_text, _rows("vn", normals), self._face_text))
-        (self.folder / cloth_name(frame)).write_text(text, encoding="ascii", newline="\n")
+    def frame(self, frame: int, points: np.ndarray, normals: np.ndarray, seconds: float = 0.0) -> None:
+        """Write the cloth at ``frame`` (``seconds`` into the simulation): positions and normals
+        (N, 3), float32; the moving colliders follow it in the same file, where they are then."""
+        parts = [f"# clothsim {__version__}: cloth at frame {frame} ({self.nw} x {self.nh} points)\n",
+                 "o cloth\n", _rows("v", points), self._uv_text, _rows("vn", normals), self._face_text]
+        offset = len(points)
+        for collider in self._moving:
+            moved = (collider.mesh.points + collider.offset(seconds)).astype(np.float32)
+            parts.append(_mesh_text(collider.name, replace(collider.mesh, points=moved), offset))
+            offset += len(moved)
+        (self.folder / cloth_name(frame)).write_text("".join(parts), encoding="ascii", newline="\n")
 
     def finish(self, start: int, end: int, fps: float) -> None:
-        """Write ``colliders.obj`` when the scene has colliders (they do not move)."""
+        """Write ``colliders.obj`` when the scene has static colliders."""
         if not self._colliders:
             return
         parts = [f"# clothsim {__version__}: static colliders\n"]

@@ -8,6 +8,9 @@ Layout of the stage (default prim ``/World``, Y up, 1 metre per unit, time code 
                               at every exported frame, primvars:st (per vertex)
     /World/colliders/sphere_0 Sphere: radius, xformOp:translate, extent
     /World/colliders/plane_0  Mesh: one large quad
+    /World/colliders/capsule_0, box_0   Mesh: triangles
+    a moving collider: xformOp:translate time-sampled at every exported frame (a sphere's
+    translate is its origin; a mesh's is its offset from the pose its points are written in)
 
 The stage is built in memory and exported once at the end to the atomic output's temporary
 file; ``.usd`` is written in the binary crate format, as usd-core does by default.
@@ -57,6 +60,8 @@ class UsdStageWriter:
         self.cloth.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         if colliders:
             UsdGeom.Scope.Define(self.stage, "/World/colliders")
+        #: (collider, its translate op, where the op puts it at offset 0) of the moving colliders
+        self._moving: list[tuple[Collider, Any, np.ndarray]] = []
         for collider in colliders:
             self._collider(f"/World/colliders/{collider.name}", collider)
 
@@ -79,7 +84,11 @@ class UsdStageWriter:
             sphere = UsdGeom.Sphere.Define(self.stage, path)
             sphere.CreateRadiusAttr(radius)
             sphere.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(-radius, -radius, -radius), Gf.Vec3f(radius, radius, radius)]))
-            sphere.AddTranslateOp().Set(Gf.Vec3d(cx, cy, cz))
+            op = sphere.AddTranslateOp()
+            if collider.moving is None:
+                op.Set(Gf.Vec3d(cx, cy, cz))
+            else:
+                self._moving.append((collider, op, np.array([cx, cy, cz])))
             return
         mesh_data: MeshData = collider.mesh
         mesh = self._mesh(path, mesh_data.faces, mesh_data.uvs)
@@ -87,6 +96,8 @@ class UsdStageWriter:
         mesh.CreateNormalsAttr(self._vec3f(mesh_data.normals))
         mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         mesh.CreateExtentAttr(self._extent(mesh_data.points))
+        if collider.moving is not None:
+            self._moving.append((collider, mesh.AddTranslateOp(), np.zeros(3)))
 
     def _vec3f(self, values: np.ndarray) -> Any:
         return self.Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(values, dtype=np.float32))
@@ -95,12 +106,15 @@ class UsdStageWriter:
         points = np.asarray(points, dtype=np.float32)
         return self._vec3f(np.stack([points.min(axis=0), points.max(axis=0)]))
 
-    def frame(self, frame: int, points: np.ndarray, normals: np.ndarray) -> None:
-        """Add the cloth's time samples at ``frame``: positions and normals (N, 3), float32."""
+    def frame(self, frame: int, points: np.ndarray, normals: np.ndarray, seconds: float = 0.0) -> None:
+        """Add the time samples at ``frame`` (``seconds`` into the simulation): the cloth's
+        positions and normals (N, 3), float32, and the moving colliders' translations."""
         time = self.Usd.TimeCode(frame)
         self.cloth.GetPointsAttr().Set(self._vec3f(points), time)
         self.cloth.GetNormalsAttr().Set(self._vec3f(normals), time)
         self.cloth.GetExtentAttr().Set(self._extent(points), time)
+        for collider, op, base in self._moving:
+            op.Set(self.Gf.Vec3d(*(float(c) for c in base + collider.offset(seconds))), time)
 
     def finish(self, start: int, end: int, fps: float) -> None:
         """Set the time range and rate, and write the stage to the path given at construction."""

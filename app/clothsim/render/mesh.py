@@ -165,3 +165,75 @@ def plane_mesh(point: tuple[float, float, float], normal: tuple[float, float, fl
     # t x b = n, so (0, 1, 2) is counter-clockwise seen from the normal's side.
     idx = np.array([0, 1, 2, 0, 2, 3], dtype=np.uint32)
     return verts, idx
+
+
+def _frame_of(axis: np.ndarray) -> np.ndarray:
+    """A rotation (3, 3) whose second column is the unit vector ``axis`` (x and z columns any
+    right-handed completion)."""
+    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    x = np.cross(axis, helper)
+    x /= np.linalg.norm(x)
+    z = np.cross(x, axis)
+    return np.stack([x, axis, z], axis=1)
+
+
+def capsule_mesh(a: tuple[float, float, float], b: tuple[float, float, float], radius: float, lat: int,
+                 lon: int) -> tuple[np.ndarray, np.ndarray]:
+    """A capsule around the segment a-b in world space: vertices (V, 11) float32 (position,
+    normal, tangent, uv) and indices, front faces outwards.
+
+    Built like :func:`sphere_mesh` with its two hemispheres pulled apart along the axis: ``lat``
+    rings from pole to pole (at least 2) and ``lon`` segments around; the equator ring is doubled
+    so that the two copies bound the cylinder between the caps.
+    """
+    if lat < 2 or lon < 3:
+        raise ValueError("capsule resolution must be at least 2 x 3")
+    pa = np.asarray(a, dtype=np.float64)
+    pb = np.asarray(b, dtype=np.float64)
+    length = float(np.linalg.norm(pb - pa))
+    axis = (pb - pa) / length if length > 0.0 else np.array([0.0, 1.0, 0.0])
+    half = lat // 2 + 1
+    theta = np.concatenate([np.linspace(0.0, math.pi / 2, half), np.linspace(math.pi / 2, math.pi, half)])
+    lift = np.concatenate([np.full(half, 0.5 * length), np.full(half, -0.5 * length)])
+    phi = np.linspace(0.0, 2.0 * math.pi, lon + 1)
+    th, ph = np.meshgrid(theta, phi, indexing="ij")
+    st, ct, sp, cp = np.sin(th), np.cos(th), np.sin(ph), np.cos(ph)
+    normal = np.stack([st * sp, ct, st * cp], axis=-1)
+    local = normal * radius
+    local[..., 1] += lift[:, None]
+    tan = np.stack([cp, np.zeros_like(cp), -sp], axis=-1)
+    span = 2.0 * radius + length
+    uv = np.stack([ph / (2.0 * math.pi), np.broadcast_to(((local[..., 1] + 0.5 * span) / span), ph.shape)], axis=-1)
+    rot = _frame_of(axis)
+    mid = 0.5 * (pa + pb)
+    pos = local @ rot.T + mid
+    verts = np.concatenate([pos, normal @ rot.T, tan @ rot.T, uv], axis=-1).reshape(-1, 11).astype(np.float32)
+    rows = theta.shape[0]
+    idx = np.arange(rows * (lon + 1), dtype=np.uint32).reshape(rows, lon + 1)
+    q = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    tris = np.stack([q[0], q[2], q[1], q[1], q[2], q[3]], axis=1).ravel()
+    return np.ascontiguousarray(verts), np.ascontiguousarray(tris.astype(np.uint32))
+
+
+def box_mesh(center: tuple[float, float, float], half_extents: tuple[float, float, float],
+             rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An oriented box in world space: 24 vertices (V, 11) float32 (four per face, so each face
+    has its own normal) and 36 indices, front faces outwards. ``rotation`` (3, 3) maps the box's
+    axes to world space (column k is its k-th axis)."""
+    rot = np.asarray(rotation, dtype=np.float64)
+    h = np.asarray(half_extents, dtype=np.float64)
+    c = np.asarray(center, dtype=np.float64)
+    verts = []
+    for k in range(3):
+        for sign in (1.0, -1.0):
+            n = np.zeros(3)
+            n[k] = sign
+            # u, v span the face with u x v = n (counter-clockwise seen from outside)
+            u = np.zeros(3)
+            u[(k + 1) % 3] = 1.0
+            v = np.cross(n, u)
+            for su, sv in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                local = (n + su * u + sv * v) * h
+                verts.append([*(rot @ local + c), *(rot @ n), *(rot @ u), (su + 1) * 0.5, (sv + 1) * 0.5])
+    idx = np.array([[4 * f, 4 * f + 1, 4 * f + 2, 4 * f, 4 * f + 2, 4 * f + 3] for f in range(6)], dtype=np.uint32)
+    return np.asarray(verts, dtype=np.float32), idx.ravel()

@@ -18,6 +18,7 @@ import numpy as np
 from ..cloth import Springs
 from ..errors import ClothsimError
 from ..scene import Scene, available_memory
+from ..sim.moving import posed, shift
 from . import mesh, textures
 from .camera import Camera, default_position, default_target
 from .context import create_context
@@ -124,6 +125,7 @@ class Renderer:
         self._spring_ranges: list[tuple[int, int, int]] = []  # (family, first index, count)
         self._spheres: dict[tuple[int, int], tuple[Any, Any, int]] = {}
         self._planes: dict[tuple[Any, ...], tuple[Any, Any, int]] = {}
+        self._shapes: dict[tuple[Any, ...], tuple[Any, Any, int]] = {}
         self._vaos: dict[tuple[Any, ...], Any] = {}
         self._textures: dict[tuple[Any, ...], Any] = {}
         self._settings_for: tuple[Scene | None, RenderSettings | None] = (None, None)
@@ -310,6 +312,20 @@ class Renderer:
             self._planes[key] = (self.ctx.buffer(verts), self.ctx.buffer(idx), int(idx.size))
         return self._planes[key]
 
+    def _draw_shape(self, prog: Any, look: str, key: tuple[Any, ...], build: Any, offset: np.ndarray) -> None:
+        """Draw a collider mesh made once by ``build()`` (world space at its scene pose), moved by ``offset``."""
+        import moderngl
+
+        if key not in self._shapes:
+            verts, idx = build()
+            self._shapes[key] = (self.ctx.buffer(verts), self.ctx.buffer(idx), int(idx.size))
+        vbo, ibo, _ = self._shapes[key]
+        vao = self._vao(look, "shape", key, lambda p: self.ctx.vertex_array(
+            p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
+            ibo, index_element_size=4, skip_errors=True))
+        _set_matrix(prog, "u_model", _translation(offset))
+        vao.render(moderngl.TRIANGLES)
+
     def _drop_vaos(self, geometry: str) -> None:
         for key in [k for k in self._vaos if k[1] == geometry]:
             self._vaos.pop(key).release()
@@ -392,27 +408,42 @@ class Renderer:
             # A sphere's far side is hidden by its near side (seen from outside): culling it
             # halves the triangles rasterised, and small triangles dominate llvmpipe's MSAA cost.
             ctx.enable(moderngl.CULL_FACE)
+        # Moving colliders are drawn where they are at the simulation's time: the shape built at
+        # its scene pose, moved by the model matrix.
+        now = float(getattr(sim, "time", 0.0))
         for sphere in scene.spheres:
             vbo, ibo, _ = self._sphere(settings.sphere_resolution)
             vao = self._vao(look, "sphere", settings.sphere_resolution, lambda p: ctx.vertex_array(
                 p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
                 ibo, index_element_size=4, skip_errors=True))
             model = np.diag([*(3 * [sphere.radius * SPHERE_DRAW_SCALE]), 1.0])
-            model[:3, 3] = sphere.origin
+            model[:3, 3] = posed(sphere, now).origin
             _set_matrix(prog, "u_model", model)
             vao.render(moderngl.TRIANGLES)
+        for capsule in scene.capsules:
+            # drawn thinner for the reason spheres are (see SPHERE_DRAW_SCALE)
+            key = ("capsule", capsule.a, capsule.b, capsule.radius, settings.sphere_resolution)
+            self._draw_shape(prog, look, key, lambda c=capsule: mesh.capsule_mesh(
+                c.a, c.b, c.radius * SPHERE_DRAW_SCALE, *settings.sphere_resolution), shift(capsule, now))
         ctx.disable(moderngl.CULL_FACE)
-        if scene.planes:
-            # Cloth resting on a plane sits 0.0001 above it; push the plane back in depth so the
-            # two never fight for the same pixels.
+        if scene.planes or scene.boxes:
+            # Cloth resting on a plane or a box face sits 0.0001 above it; push them back in
+            # depth so the two never fight for the same pixels.
             ctx.polygon_offset = (1.0, 4.0)
-            _set_matrix(prog, "u_model", ident)
             for plane in scene.planes:
                 vbo, ibo, _ = self._plane(plane.point, plane.normal)
                 vao = self._vao(look, "plane", (plane.point, plane.normal), lambda p: ctx.vertex_array(
                     p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
                     ibo, index_element_size=4, skip_errors=True))
+                _set_matrix(prog, "u_model", _translation(shift(plane, now)))
                 vao.render(moderngl.TRIANGLES)
+            if look != "wireframe":
+                ctx.enable(moderngl.CULL_FACE)
+            for box in scene.boxes:
+                key = ("box", box.center, box.half_extents, box.rotation)
+                self._draw_shape(prog, look, key, lambda b=box: mesh.box_mesh(b.center, b.half_extents, b.matrix()),
+                                 shift(box, now))
+            ctx.disable(moderngl.CULL_FACE)
             ctx.polygon_offset = (0.0, 0.0)
         ctx.wireframe = False
         ctx.copy_framebuffer(self._fbo, self._ms_fbo)  # resolves the multisampled image
@@ -470,6 +501,12 @@ class Renderer:
 
 
 _FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])
+
+
+def _translation(offset: np.ndarray) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, 3] = offset
+    return m
 
 
 def _set_matrix(prog: Any, name: str, m: np.ndarray) -> None:

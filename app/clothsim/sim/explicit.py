@@ -54,14 +54,14 @@ def run_verlet_rate(steps: int, pos: np.ndarray, last: np.ndarray, forces: np.nd
     ``wind`` and ``pins`` are the :mod:`clothsim.sim.state` groups, None when the scene has none."""
     skipped = 0
     offset = np.empty(3)
-    for s in range(steps):
+    for substep in range(steps):
         accumulate_forces(pos, forces, stream, mass, gravity)
         if wind is not None:
-            add_wind(pos, last, forces, wind, substep_time(wind.clock, s, wind.dt))
+            add_wind(pos, last, forces, wind, substep_time(wind.clock, substep, wind.dt))
         verlet_rate_step(pos, last, forces, free, 1.0 / mass, dt, f, phi)
         if pins is not None:
-            move_pins(pos, last, pins, substep_time(pins.clock, s + 1, pins.dt), offset)
-        skipped += corrections(pos, last, free, blocks, rest, nw, post)
+            move_pins(pos, last, pins, substep_time(pins.clock, substep + 1, pins.dt), offset)
+        skipped += corrections(pos, last, free, blocks, rest, nw, post, substep)
     return skipped
 
 
@@ -98,14 +98,14 @@ def run_symplectic(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarra
     """``steps`` substeps of symplectic Euler plus the shared corrections; returns colliders skipped."""
     skipped = 0
     offset = np.empty(3)
-    for s in range(steps):
+    for substep in range(steps):
         accumulate_forces(pos, forces, stream, mass, gravity)
         if wind is not None:
-            add_wind(pos, last, forces, wind, substep_time(wind.clock, s, wind.dt))
+            add_wind(pos, last, forces, wind, substep_time(wind.clock, substep, wind.dt))
         symplectic_step(pos, last, vel, forces, free, 1.0 / mass, dt, f, phi)
         if pins is not None:
-            move_pins(pos, last, pins, substep_time(pins.clock, s + 1, pins.dt), offset)
-        skipped += corrections(pos, last, free, blocks, rest, nw, post)
+            move_pins(pos, last, pins, substep_time(pins.clock, substep + 1, pins.dt), offset)
+        skipped += corrections(pos, last, free, blocks, rest, nw, post, substep)
         if fix_velocity:
             velocities_from_positions(pos, last, vel, free, dt)
     return skipped

@@ -33,6 +33,8 @@ from .constraints import provot_band, provot_bands, provot_cut
 from .forces import gather_chunk, spring_job
 from .integrate import verlet_chunk
 from .pinmotion import offset_at, pin_chunk, substep_time
+from .moving import collide_moving_planes, collide_moving_spheres, moving, reach_moving, update_poses
+from .shapes import collide_shapes, flags_for, reach_shapes
 from .selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from .team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
 
@@ -146,7 +148,7 @@ def reachable_colliders(box: np.ndarray, spheres: np.ndarray, planes: np.ndarray
 @njit(inline="always", **KERNEL)
 def collide_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spheres: np.ndarray, planes: np.ndarray,
                   offset: float, sphere_on: np.ndarray, plane_on: np.ndarray, c: int) -> None:
-    """Work item ``c`` of :func:`collide_reachable`: the c-th of CHUNKS parts of the free points."""
+    """The static spheres and planes for the c-th of CHUNKS parts of the free points."""
     n = free.shape[0]
     f0, f1 = share(n, c, CHUNKS)
     part = free[f0:f1]
@@ -158,25 +160,62 @@ def collide_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spheres: 
             collide_planes(pos, last, part, planes[o : o + 1], offset)
 
 
+@njit(**KERNEL)
+def reach_colliders(box: np.ndarray, col: tuple, sphere_on: np.ndarray, plane_on: np.ndarray,
+                    capsule_on: np.ndarray | None, cuboid_on: np.ndarray | None, motion: tuple | None,
+                    capsules: np.ndarray | None, cuboids: np.ndarray | None) -> int:
+    """Mark which colliders of every kind the cloth's box may reach; returns how many were ruled out.
+
+    ``motion``, ``capsules`` and ``cuboids`` are the group's optional fields passed on their own:
+    Numba prunes a branch on an argument that is ``None`` (not on a tuple's field), so a scene
+    compiles only the kinds it has."""
+    if motion is None:
+        skipped = reachable_colliders(box, col.spheres, col.planes, sphere_on, plane_on)
+    else:
+        skipped = reach_moving(box, col.spheres, col.planes, sphere_on, plane_on, motion)
+    return skipped + reach_shapes(box, capsules, cuboids, capsule_on, cuboid_on, col.offset)
+
+
+@njit(**KERNEL)
+def collide_part(pos: np.ndarray, last: np.ndarray, col: tuple, sphere_on: np.ndarray, plane_on: np.ndarray,
+                 capsule_on: np.ndarray | None, cuboid_on: np.ndarray | None, motion: tuple | None,
+                 capsules: np.ndarray | None, cuboids: np.ndarray | None, c: int) -> None:
+    """Work item ``c`` of the collider pass: the c-th of CHUNKS parts of the free points meets the
+    reachable spheres, planes, capsules and boxes, kind by kind in scene order."""
+    n = col.free.shape[0]
+    f0, f1 = share(n, c, CHUNKS)
+    part = col.free[f0:f1]
+    if motion is None:
+        collide_chunk(pos, last, col.free, col.spheres, col.planes, col.offset, sphere_on, plane_on, c)
+    else:
+        collide_moving_spheres(pos, last, part, col.spheres, sphere_on, motion.sphere_carry)
+        collide_moving_planes(pos, last, part, col.planes, plane_on, motion.plane_carry, col.offset)
+    collide_shapes(pos, last, part, capsules, cuboids, capsule_on, cuboid_on, col.offset)
+
+
 @njit(**PARALLEL)
-def collide_reachable(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spheres: np.ndarray,
-                      planes: np.ndarray, offset: float, box: np.ndarray, sphere_on: np.ndarray,
-                      plane_on: np.ndarray) -> int:
-    """Collide with the colliders the cloth can reach; returns the number skipped.
+def collide_reachable(pos: np.ndarray, last: np.ndarray, col: tuple, motion: tuple | None,
+                      capsules: np.ndarray | None, cuboids: np.ndarray | None, substep: int) -> int:
+    """Collide with the colliders the cloth can reach at substep ``substep`` of the call (moving
+    ones put at their pose first); returns the number skipped.
 
     A point's correction depends on that point alone, so the free points are split over the
-    cores; each point meets the spheres, then the planes, in scene order.
+    cores; each point meets the spheres, then the planes, capsules and boxes, in scene order.
     """
-    cloth_bounds(pos, last, box)
-    skipped = reachable_colliders(box, spheres, planes, sphere_on, plane_on)
+    update_poses(motion, col.spheres, col.planes, capsules, cuboids, substep)
+    cloth_bounds(pos, last, col.box)
+    skipped = reach_colliders(col.box, col, col.sphere_on, col.plane_on, col.capsule_on, col.cuboid_on, motion,
+                              capsules, cuboids)
     for c in prange(CHUNKS):
-        collide_chunk(pos, last, free, spheres, planes, offset, sphere_on, plane_on, c)
+        collide_part(pos, last, col, col.sphere_on, col.plane_on, col.capsule_on, col.cuboid_on, motion, capsules,
+                     cuboids, c)
     return skipped
 
 
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
-            col: tuple | None, wind: tuple | None, pins: tuple | None, sync: np.ndarray, passes: int) -> None:
+            col: tuple | None, mov: tuple | None, wind: tuple | None, pins: tuple | None, sync: np.ndarray,
+            passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes.
 
     Returns early, with the state half-way through a substep, when a barrier reports that the
@@ -207,10 +246,17 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         box = col.box
         sphere_on = col.sphere_on
         plane_on = col.plane_on
+        capsule_on = col.capsule_on
+        cuboid_on = col.cuboid_on
         if member != 0:
             box = np.empty(6)
             sphere_on = np.empty(col.spheres.shape[0], dtype=np.bool_)
             plane_on = np.empty(col.planes.shape[0], dtype=np.bool_)
+            capsule_on = flags_for(col.capsules)
+            cuboid_on = flags_for(col.cuboids)
+        # Moving colliders: member 0 poses them at the start of the collider pass, behind one
+        # more barrier (the pass reads the poses right after).
+        posing = moving(mov)
         # The members' boxes are taken right after Verlet, before self-collision, which moves no
         # point by dist / sim_steps or more (an average of pushes each shorter than dist, over
         # sim_steps): widened by that, the box still bounds the cloth the colliders see, so
@@ -220,19 +266,19 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
     if pins is not None:
         offset = np.empty(3)
     gen = np.int64(0)
-    for step in range(steps):
+    for substep in range(steps):
         if integrate:
             lo, hi = share(spring_jobs, member, size)
             for job in range(lo, hi):
                 spring_job(pos, st.offsets, st.k, st.spring_rest, st.buf, job)
             if wind is not None:
                 # the triangles' wind forces read only positions: same phase as the springs
-                now = substep_time(wind.clock, step, wind.dt)
+                now = substep_time(wind.clock, substep, wind.dt)
                 w0, w1 = share(CHUNKS, member, size)
                 for c in range(w0, w1):
                     wind_chunk(pos, last, wind, now, c)
             if pins is not None:
-                offset_at(pins.times, pins.points, pins.velocity, substep_time(pins.clock, step + 1, pins.dt), offset)
+                offset_at(pins.times, pins.points, pins.velocity, substep_time(pins.clock, substep + 1, pins.dt), offset)
             gen = barrier(sync, size, gen)
             if gen < 0:
                 return
@@ -306,6 +352,12 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     return
         if col is not None:
             if colliders:
+                if posing:
+                    if member == 0:
+                        update_poses(mov, col.spheres, col.planes, col.capsules, col.cuboids, substep)
+                    gen = barrier(sync, size, gen)
+                    if gen < 0:
+                        return
                 lo, hi = share(CHUNKS, member, size)
                 if integrate:
                     merge_bounds(col.boxes, margin, box)
@@ -316,11 +368,13 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     if gen < 0:
                         return
                     merge_bounds(col.boxes, 0.0, box)
-                skipped = reachable_colliders(box, col.spheres, col.planes, sphere_on, plane_on)
+                skipped = reach_colliders(box, col, sphere_on, plane_on, capsule_on, cuboid_on, mov, col.capsules,
+                                          col.cuboids)
                 if member == 0:
                     st.skips[0] += skipped
                 for c in range(lo, hi):
-                    collide_chunk(pos, last, col.free, col.spheres, col.planes, col.offset, sphere_on, plane_on, c)
+                    collide_part(pos, last, col, sphere_on, plane_on, capsule_on, cuboid_on, mov, col.capsules,
+                                 col.cuboids, c)
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
@@ -358,29 +412,32 @@ def _addresses(argtypes: tuple) -> tuple[int, int]:
     def meanwhile() -> None:
         if repel is not None:
             repel_slots.compile(repel)
-        run_substeps.compile((i64, *argtypes[3:10], i64, i64, i64))
+        run_substeps.compile((i64, *argtypes[3:11], i64, i64, i64))
         side_kernels()
 
     compile_elsewhere(_member, argtypes, meanwhile)
     return native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel)
 
 
-def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None, wind: tuple | None,
-                     pins: tuple | None, sync: np.ndarray) -> tuple[int, int]:
+def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None, mov: tuple | None,
+                     wind: tuple | None, pins: tuple | None, sync: np.ndarray) -> tuple[int, int]:
     """Addresses of :func:`_member` compiled for these state groups and of the
     :func:`~clothsim.sim.selfcollide.repel_slots` it calls (0 without the spec's hash), compiled or
     loaded from the cache on first use; the second goes into ``SpecHash.repel``."""
     i64 = types.int64
-    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, wind, pins, sync)), i64))
+    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, mov, wind, pins, sync)), i64))
 
 
 @njit(**PARALLEL)
 def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
-                 wind: tuple | None, pins: tuple | None, sync: np.ndarray, size: int, passes: int, member: int) -> int:
+                 mov: tuple | None, wind: tuple | None, pins: tuple | None, sync: np.ndarray, size: int, passes: int,
+                 member: int) -> int:
     """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
 
     ``st``, ``spec``, ``grid``, ``col``, ``wind`` and ``pins`` are the named tuples of
-    :mod:`clothsim.sim.state` (all but the first ``None`` for a pass the scene does not use). ``sync`` is
+    :mod:`clothsim.sim.state` and ``mov`` the tracks of moving colliders
+    (:class:`clothsim.sim.moving.Motion`); all but ``st`` are ``None`` for a pass the scene does
+    not use. ``sync`` is
     :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
     :mod:`clothsim.sim.team`); the result does not depend on it. After the call
     ``sync[team.ABORT]`` set means the frame was given up half-way (restore and run it alone).
@@ -398,7 +455,7 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
             me = 0
             if working == size:
                 me = np.int64(m)
-            if call_native(member, (me, working, steps, st, spec, grid, col, wind, pins, sync, passes)) != 0:
+            if call_native(member, (me, working, steps, st, spec, grid, col, mov, wind, pins, sync, passes)) != 0:
                 sync[FAILED] = 1
                 atomic_cas(sync, ABORT, 0, 1)
     return st.skips[0]

@@ -90,9 +90,9 @@ def blow_up_reason(pos: np.ndarray, last: np.ndarray, free: np.ndarray, dt: floa
     Energy test: rest lengths are measured from the initial grid, so the cloth starts with no
     elastic energy and (static colliders and damping only remove energy) its kinetic energy can
     only come from the work gravity has done, g . (drop of the free points' centre of mass), and
-    from what drives it: ``driven`` (m/s) bounds the speed of the air (wind plus gusts) and of the
-    moving pins, and a cloth dragged or blown along moves at about that speed, so 1/2 driven^2
-    J/kg is added to the work.
+    from what drives it: ``driven`` (m/s) bounds the speed of the air (wind plus gusts), of the
+    moving pins and of the moving colliders, and a cloth dragged, blown or carried along moves at
+    about that speed, so 1/2 driven^2 J/kg is added to the work.
     """
     finite, sum_d2, drop = _frame_sums(pos, last, free, start)
     if not finite:
@@ -131,7 +131,7 @@ def _frame_sums(pos: np.ndarray, last: np.ndarray, free: np.ndarray, start: np.n
 def sim_blow_up_reason(sim: Any) -> str | None:
     """:func:`blow_up_reason` for a :class:`~clothsim.sim.simulation.Simulation`."""
     return blow_up_reason(sim._pos, sim._last, sim.free, sim.dt, sim._gravity, sim.initial_positions.T,
-                          driven_speed(sim.scene))
+                          driven_speed(sim.scene) + sim.collider_top_speed)
 
 
 def driven_speed(scene: Scene) -> float:

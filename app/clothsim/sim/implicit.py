@@ -181,15 +181,15 @@ def run_implicit(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray,
     wind's force is taken explicitly (at the start of the substep)."""
     total = 0
     offset = np.empty(3)
-    for s in range(steps):
+    for substep in range(steps):
         accumulate_forces(pos, forces, stream, mass, gravity)
         if wind is not None:
-            add_wind(pos, last, forces, wind, substep_time(wind.clock, s, wind.dt))
+            add_wind(pos, last, forces, wind, substep_time(wind.clock, substep, wind.dt))
         total += implicit_update(pos, last, vel, forces, free, mask, si, sj, rest, kspr, jac, scratch, mass, dt,
                                  c, keep_after, tol, max_iter)
         if pins is not None:
-            move_pins(pos, last, pins, substep_time(pins.clock, s + 1, pins.dt), offset)
-        corrections(pos, last, free, blocks, rest, nw, post)
+            move_pins(pos, last, pins, substep_time(pins.clock, substep + 1, pins.dt), offset)
+        corrections(pos, last, free, blocks, rest, nw, post, substep)
         if fix_velocity:
             velocities_from_positions(pos, last, vel, free, dt)
     return total

@@ -24,7 +24,6 @@ from typing import Any
 import numba
 import numpy as np
 
-from .collide import SURFACE_OFFSET
 from .explicit import run_symplectic, run_verlet_rate, verlet_start
 from .forces import accumulate_forces
 from .implicit import CG_MAX_ITERATIONS, CG_TOLERANCE, run_implicit
@@ -105,8 +104,7 @@ class IntegratorState:
 def post_args(sim: Any) -> tuple:
     """The correction passes' arguments, packed for :func:`clothsim.sim.passes.corrections`."""
     return (sim.pinned, sim._self_mode, sim.scene.cloth.thickness, sim.scene.simulation.simulation_steps,
-            sim._cell, sim._keys, sim._slots, sim._table, sim._order, sim._stretch_limit, sim._spheres,
-            sim._planes, SURFACE_OFFSET, sim._box, sim._sphere_on, sim._plane_on)
+            sim._cell, sim._keys, sim._slots, sim._table, sim._order, sim._stretch_limit, *sim._kernel_args[3:5])
 
 
 def state_of(sim: Any) -> IntegratorState:
@@ -142,7 +140,7 @@ def _advance(sim: Any, steps: int) -> None:
     fix = has_corrections(post)
     f, phi, c = damping_factors(sim)
     dt = sim.dt
-    wind, pins = sim._kernel_args[4], sim._kernel_args[5]
+    wind, pins = sim._kernel_args[5], sim._kernel_args[6]  # (st, spec, grid, col, mov, wind, pins)
     if name == "verlet":
         if not st.started:
             accumulate_forces(sim._pos, sim._forces, sim._stream, sim.mass, sim._gravity)

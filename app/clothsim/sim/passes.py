@@ -19,25 +19,33 @@ from .selfcollide import self_collide
 
 @njit(**EXACT)
 def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.ndarray, rest: np.ndarray,
-                nw: int, post: tuple) -> int:
-    """Apply self-collision, colliders and Provot in place; returns the colliders skipped.
+                nw: int, post: tuple, substep: int) -> int:
+    """Apply self-collision, colliders and Provot in place at substep ``substep`` of the call;
+    returns the colliders skipped.
 
     ``post`` = (pinned, self_mode, thickness, sim_steps, cell, keys, slots, start, order,
-    stretch_limit, spheres, planes, offset, box, sphere_on, plane_on).
+    stretch_limit, colliders, motion): the :class:`~clothsim.sim.state.Colliders` group and the
+    :class:`~clothsim.sim.moving.Motion` group, each None when the scene has none.
     """
-    (pinned, self_mode, thickness, sim_steps, cell, keys, slots, start, order, stretch_limit, spheres, planes,
-     offset, box, sphere_on, plane_on) = post
+    (pinned, self_mode, thickness, sim_steps, cell, keys, slots, start, order, stretch_limit, col, mov) = post
     skipped = 0
     if self_mode != 0:
         self_collide(pos, free, thickness, sim_steps, self_mode, cell[0], cell[1], cell[2], keys, slots, start,
                      order)
-    if spheres.shape[0] + planes.shape[0] > 0:
-        skipped += collide_reachable(pos, last, free, spheres, planes, offset, box, sphere_on, plane_on)
+    skipped += collide_group(pos, last, col, mov, substep)
     if stretch_limit > 0.0:
         provot(pos, pinned, blocks, rest, nw, stretch_limit)
     return skipped
 
 
+@njit(**EXACT)
+def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, mov: tuple | None, substep: int) -> int:
+    """The collider pass when the scene has colliders (``col`` is not None); returns those skipped."""
+    if col is None:
+        return 0
+    return collide_reachable(pos, last, col, mov, col.capsules, col.cuboids, substep)
+
+
 def has_corrections(post: tuple) -> bool:
     """True when any correction pass is on (then velocities must be re-derived from positions)."""
-    return bool(post[1] != 0 or post[10].shape[0] + post[11].shape[0] > 0 or post[9] > 0.0)
+    return bool(post[1] != 0 or post[10] is not None or post[9] > 0.0)

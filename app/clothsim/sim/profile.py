@@ -40,11 +40,11 @@ class Profiler:
                 out["springs: " + ", ".join(off)] = "family disabled (absent from the spring arrays)"
         if sim._self_mode == 0:
             out["self-collision"] = "simulation.self_collision is false"
-        if len(sim._spheres) + len(sim._planes) == 0:
-            out["colliders"] = "scene has no sphere or plane"
-        if sim._kernel_args[4] is None:
+        if sim.n_colliders == 0:
+            out["colliders"] = "scene has no sphere, plane, capsule or box"
+        if sim._kernel_args[5] is None:  # (st, spec, grid, col, mov, wind, pins)
             out["wind"] = "scene has no wind (or only still air)"
-        if sim._kernel_args[5] is None:
+        if sim._kernel_args[6] is None:
             out["moving pins"] = "cloth has no pin_motion"
         if sim._stretch_limit <= 0:
             out["provot"] = "simulation.max_stretch is null"
@@ -70,8 +70,8 @@ class Profiler:
     def _passes(self, steps: int, size: int) -> bool:
         sim = self.sim
         t = time.perf_counter
-        n_colliders = len(sim._spheres) + len(sim._planes)
-        for _ in range(steps):
+        n_colliders = sim.n_colliders
+        for substep in range(steps):
             for name, bit, on in (("forces+integrate", PASS_INTEGRATE, True),
                                   ("self-collision", PASS_SELF, sim._self_mode != 0),
                                   ("colliders", PASS_COLLIDERS, n_colliders > 0),
@@ -79,7 +79,7 @@ class Profiler:
                 if on:
                     before = sim.colliders_skipped
                     t0 = t()
-                    finished = sim.run_kernel(1, bit, size)
+                    finished = sim.run_kernel(1, bit, size, substep)
                     self._add(name, t() - t0)
                     if not finished:
                         return False

@@ -16,6 +16,8 @@ from .frame import PASS_ALL, PASS_INTEGRATE, kernel_addresses, run_substeps
 from .aero import incidence, triangles
 from .jit import CHUNKS
 from .pinmotion import move_pins
+from .moving import pack_motion, top_speed
+from .shapes import collider_rows
 from .selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
 from .state import ClothState, Colliders, GridHash, PinMotion, SpecHash, Wind
 
@@ -50,11 +52,17 @@ class Simulation:
         self._all_springs = all_springs(self.nw, self.nh, self.initial_positions)
         self._cut = np.zeros(len(self._all_springs), dtype=np.bool_)
         self._forces = np.zeros((3, n))
-        self._spheres = np.array([[*s.origin, s.radius, s.friction] for s in scene.spheres], dtype=np.float64).reshape(-1, 5)
-        self._planes = np.array([[*p.point, *p.normal, p.friction] for p in scene.planes], dtype=np.float64).reshape(-1, 7)
+        self._rows = collider_rows(scene)
+        self._spheres, self._planes, self._capsules, self._cuboids = (r.copy() if r is not None else None
+                                                                      for r in self._rows)
         self._box = np.zeros(6)
         self._sphere_on = np.zeros(len(self._spheres), dtype=np.bool_)
         self._plane_on = np.zeros(len(self._planes), dtype=np.bool_)
+        self._capsule_on = None if self._capsules is None else np.zeros(len(self._capsules), dtype=np.bool_)
+        self._cuboid_on = None if self._cuboids is None else np.zeros(len(self._cuboids), dtype=np.bool_)
+        self._motion = pack_motion(scene)
+        #: Top speed of the moving colliders (m/s): the blow-up guard allows the energy they give.
+        self.collider_top_speed = top_speed(scene)
         m = table_size(n)
         self._keys = np.zeros(n, dtype=np.int64)
         self._slots = np.zeros(n, dtype=np.int64)
@@ -242,11 +250,12 @@ class Simulation:
         elif self._self_mode == MODE_GRID:
             grid = GridHash(self.free, cloth.thickness, steps, self._cell, self._keys, self._slots, self._table,
                             self._order)
-        if len(self._spheres) + len(self._planes) > 0:
+        if self.n_colliders > 0:
             margin = 0.0 if self._self_mode == 0 else 1.001 * (2.0 * cloth.thickness) / steps
             col = Colliders(self.free, self._spheres, self._planes, SURFACE_OFFSET, self._box, self._sphere_on,
-                            self._plane_on, self._boxes, margin)
-        return st, spec, grid, col, self._wind_group(), self._pin_group()
+                            self._plane_on, self._boxes, margin, self._capsules, self._cuboids, self._capsule_on,
+                            self._cuboid_on)
+        return st, spec, grid, col, self._motion, self._wind_group(), self._pin_group()
 
     def _wind_group(self) -> Wind | None:
         rows, modes = wind_rows(self.scene.winds)
@@ -272,12 +281,24 @@ class Simulation:
     def _place_pins(self) -> None:
         """At the start, the whole cloth moved by the pins' offset at time 0, at rest: the pins are
         then at rest + offset(0) with no jump in the first substep."""
-        pm = self._kernel_args[5]
+        pm = self._kernel_args[6]
         if pm is not None:
             offset = np.empty(3)
             move_pins(self._pos, self._last, pm, self.time, offset)
             self._pos[...] = self.initial_positions.T + offset[:, None]
             self._last[...] = self._pos
+
+    @property
+    def n_colliders(self) -> int:
+        """Colliders of every kind in the scene."""
+        return sum(0 if r is None else len(r) for r in self._rows)
+
+    def _start_clock(self, substep: int = 0) -> None:
+        """Tell the moving colliders the time of the next call's first substep."""
+        if self._motion is not None:
+            # the clock counts the substeps run so far, so ``substep`` is already in self.time
+            self._motion.clock[0] = self.time
+            self._motion.clock[1] = self.dt
 
     # ------------------------------------------------------------------------------------------
     # Stepping
@@ -286,6 +307,9 @@ class Simulation:
         """Back to the initial state (same seed, so the same jitter)."""
         self._pos[...] = self.initial_positions.T
         self._last[...] = self.initial_positions.T
+        for rows, start in zip((self._spheres, self._planes, self._capsules, self._cuboids), self._rows):
+            if rows is not None:
+                rows[...] = start
         self.frame = 0
         self.colliders_skipped = 0
         self.integrator_state = None
@@ -308,9 +332,11 @@ class Simulation:
         sim = self.scene.simulation
         return sim.integrator == "verlet" and sim.damping_mode == "spec"
 
-    def run_kernel(self, steps: int, passes: int = PASS_ALL, size: int = 1) -> bool:
+    def run_kernel(self, steps: int, passes: int = PASS_ALL, size: int = 1, substep: int = 0) -> bool:
         """Run ``steps`` substeps of the frame kernel (only the ``passes`` bits) with a team of
-        ``size``; False when the team gave the frame up half-way (the state must be restored)."""
+        ``size``, the first being substep ``substep`` of the current frame; False when the team
+        gave the frame up half-way (the state must be restored)."""
+        self._start_clock(substep)
         if not self._member_at:
             self._member_at, repel = kernel_addresses(*self._kernel_args, self._sync)
             st, spec, *rest = self._kernel_args
@@ -324,19 +350,21 @@ class Simulation:
         self.team.after(self._sync, size)
         return self._sync[team.ABORT] == 0
 
-    def _run(self, steps: int, saved: tuple | None = None) -> None:
-        """Advance ``steps`` substeps. With ``saved`` (the state before them), the fast path may use
-        the thread team and, if the team gives up half-way, restores ``saved`` and runs alone."""
+    def _run(self, steps: int, saved: tuple | None = None, substep: int = 0) -> None:
+        """Advance ``steps`` substeps from substep ``substep`` of the frame. With ``saved`` (the
+        state before them), the fast path may use the thread team and, if the team gives up
+        half-way, restores ``saved`` and runs alone."""
         if not self.uses_spec_path:
             from .integrators import advance
 
+            self._start_clock(substep)
             advance(self, steps)
             self._clock[1] += steps
             return
         size = self.team.size() if saved is not None else 1
-        if not self.run_kernel(steps, PASS_ALL, size):
+        if not self.run_kernel(steps, PASS_ALL, size, substep):
             self._restore(saved)
-            self.run_kernel(steps, PASS_ALL, 1)
+            self.run_kernel(steps, PASS_ALL, 1, substep)
 
     def _restore(self, saved: tuple) -> None:
         self._pos[...] = saved[0]
@@ -366,7 +394,7 @@ class Simulation:
         self._restore(saved)
         bad, what = steps, "positions became non-finite"
         for sub in range(1, steps + 1):
-            self._run(1)
+            self._run(1, None, sub - 1)
             reason = sim_blow_up_reason(self)
             if reason is not None:
                 bad, what = sub, reason

@@ -76,7 +76,14 @@ class GridHash(NamedTuple):
 
 
 class Colliders(NamedTuple):
-    """Spheres and planes, with the bounding boxes of the skip test."""
+    """Every collider, kind by kind, with the bounding boxes of the skip test.
+
+    Spheres and planes are always arrays (possibly empty: the course's kernels); capsules and
+    boxes (``cuboids``, rows of :mod:`clothsim.sim.shapes`) with their reach flags are ``None``
+    when the scene has none, so their code is pruned before typing. ``boxes`` are the members'
+    bounding boxes of the cloth. The tracks of moving colliders are a group of their own
+    (:class:`clothsim.sim.moving.Motion`): a parallel loop cannot take a tuple nested in a tuple.
+    """
 
     free: np.ndarray
     spheres: np.ndarray
@@ -87,6 +94,10 @@ class Colliders(NamedTuple):
     plane_on: np.ndarray
     boxes: np.ndarray
     self_margin: float
+    capsules: np.ndarray | None = None
+    cuboids: np.ndarray | None = None
+    capsule_on: np.ndarray | None = None
+    cuboid_on: np.ndarray | None = None
 
 
 class Wind(NamedTuple):

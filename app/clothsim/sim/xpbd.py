@@ -88,15 +88,15 @@ def run_xpbd(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray, fre
     force (into ``forces``) kicks the velocities before the prediction."""
     skipped = 0
     offset = np.empty(3)
-    for s in range(steps):
+    for substep in range(steps):
         if wind is not None:
             forces[:, :] = 0.0
-            add_wind(pos, last, forces, wind, substep_time(wind.clock, s, wind.dt))
+            add_wind(pos, last, forces, wind, substep_time(wind.clock, substep, wind.dt))
             kick(vel, forces, free, w, dt * phi)
         predict(pos, last, vel, free, gravity, dt, f, phi)
         if pins is not None:
-            move_pins(pos, last, pins, substep_time(pins.clock, s + 1, pins.dt), offset)
+            move_pins(pos, last, pins, substep_time(pins.clock, substep + 1, pins.dt), offset)
         solve_constraints(pos, w, si, sj, rest, kspr, lam, dt, iterations)
-        skipped += corrections(pos, last, free, blocks, rest, nw, post)
+        skipped += corrections(pos, last, free, blocks, rest, nw, post, substep)
         velocities_from_positions(pos, last, vel, free, dt)
     return skipped

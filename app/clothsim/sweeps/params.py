@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import ClothsimError, FieldError
-from ..scene import Scene, scene_from_dict
+from ..scene import Scene, collider_json, scene_from_dict
 from ..validate import SceneWarning, shown
 
 __all__ = ["Distribution", "Run", "build_scene", "expand", "parse_set", "parse_values", "run_id",
@@ -258,8 +258,10 @@ def scene_json(scene: Scene) -> dict[str, Any]:
                                {"keyframes": [[t, list(p)] for t, p in motion.keyframes]})
     return {
         "cloth": cloth,
-        "sphere": [dataclasses.asdict(s) for s in scene.spheres],
-        "plane": [dataclasses.asdict(p) for p in scene.planes],
+        "sphere": [collider_json(s) for s in scene.spheres],
+        "plane": [collider_json(p) for p in scene.planes],
+        **({"capsule": [collider_json(c) for c in scene.capsules]} if scene.capsules else {}),
+        **({"box": [collider_json(b) for b in scene.boxes]} if scene.boxes else {}),
         **({"wind": [w.as_json() for w in scene.winds]} if scene.winds else {}),
         "simulation": dataclasses.asdict(scene.simulation),
         **({"render": scene.render} if scene.render is not None else {}),
