@@ -83,11 +83,11 @@ def test_a_member_that_never_comes_ends_the_wait_in_bounded_time() -> None:
     # it must give up at its first barrier after BARRIER_NS, raise ABORT and return.
     sim = clothsim.Simulation(_scene("pinned2"))
     sim.step(1)  # compiled before the clock starts
-    st, spec, grid, col = sim._kernel_args
+    st, spec, grid, col, mesh = sim._kernel_args
     sync = team.new_sync()
     sync[team.MODE] = team._TEAM
     t0 = time.perf_counter()
-    frame._member(0, 2, 3, st, spec, grid, col, sync, PASS_ALL)
+    frame._member(0, 2, 3, st, spec, grid, col, mesh, sync, PASS_ALL)
     waited = time.perf_counter() - t0
     assert sync[team.ABORT] == 1
     assert team.BARRIER_NS / 1e9 <= waited < team.BARRIER_NS / 1e9 + 20.0
@@ -98,12 +98,12 @@ def test_a_frame_given_up_half_way_is_restored_and_run_alone(monkeypatch: pytest
     # simulation must restore the frame's start, run it alone, and try the team again later.
     real = frame.run_substeps
 
-    def lost_member(steps, st, spec, grid, col, sync, size, passes, address):  # noqa: ANN001, ANN202
+    def lost_member(steps, st, spec, grid, col, mesh, sync, size, passes, address):  # noqa: ANN001, ANN202
         if size == 1:
-            return real(steps, st, spec, grid, col, sync, size, passes, address)
+            return real(steps, st, spec, grid, col, mesh, sync, size, passes, address)
         sync[:] = 0
         sync[team.MODE] = team._TEAM
-        frame._member(0, size, steps, st, spec, grid, col, sync, passes)
+        frame._member(0, size, steps, st, spec, grid, col, mesh, sync, passes)
         return 0
 
     scene = _scene("pinned4")

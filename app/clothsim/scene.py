@@ -17,6 +17,7 @@ from typing import Any
 
 from . import validate as V
 from .errors import ClothsimError, SceneError
+from .meshcollider import MESH, MeshSpec
 from .resources import data_dir
 from .validate import SceneWarning  # noqa: F401 - warned by the rules, imported from here by users
 
@@ -104,6 +105,7 @@ class Scene:
     simulation: SimulationSpec = field(default_factory=SimulationSpec)
     render: dict[str, Any] | None = None
     path: str = "<scene>"
+    meshes: tuple[MeshSpec, ...] = ()
 
     def with_cloth(self, **changes: Any) -> "Scene":
         """A copy with some cloth fields replaced (no re-validation)."""
@@ -192,7 +194,7 @@ def scene_from_dict(data: Any, path: str = "<scene>") -> Scene:
     cloth = ClothSpec(**values["cloth"])
     _check_memory(cloth, values["simulation"], path)
     return Scene(cloth=cloth, spheres=values["spheres"], planes=values["planes"],
-                 simulation=values["simulation"], render=values["render"], path=path)
+                 simulation=values["simulation"], render=values["render"], path=path, meshes=values["meshes"])
 
 
 def check_field(section: str, name: str, value: Any) -> Any:
@@ -310,9 +312,10 @@ SCENE = V.record({
     "cloth": V.required(CLOTH),
     "sphere": V.default(V.one_or_many(V.then(SPHERE, lambda v, at: SphereSpec(**v))), (), dest="spheres"),
     "plane": V.default(V.one_or_many(V.then(PLANE, lambda v, at: PlaneSpec(**v))), (), dest="planes"),
+    "mesh": V.default(V.one_or_many(MESH), (), dest="meshes"),
     "simulation": V.default(_simulation, _SIM_DEFAULTS, dest="simulation"),
     "render": V.default(_render, None),
-}, unknown="unknown top-level object (expected one of: cloth, sphere, plane, simulation, render)")
+}, unknown="unknown top-level object (expected one of: cloth, sphere, plane, mesh, simulation, render)")
 
 
 # ----------------------------------------------------------------------------------------------

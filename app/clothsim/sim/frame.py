@@ -31,6 +31,7 @@ from .collide import collide_planes, collide_spheres
 from .constraints import provot_band, provot_bands, provot_cut
 from .forces import gather_chunk, spring_job
 from .integrate import verlet_chunk
+from .meshcollide import collide_meshes_chunk, mesh_flags, reachable_meshes
 from .selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from .team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
 
@@ -174,7 +175,7 @@ def collide_reachable(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spher
 
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
-            col: tuple | None, sync: np.ndarray, passes: int) -> None:
+            col: tuple | None, mesh: tuple | None, sync: np.ndarray, passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes.
 
     Returns early, with the state half-way through a substep, when a barrier reports that the
@@ -215,8 +216,9 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         # skipping stays exact.
         margin = 0.0 if not self_on else col.self_margin
         cols = np.empty((2, 64))
+        mesh_on = mesh_flags(mesh)
     gen = np.int64(0)
-    for _ in range(steps):
+    for step in range(steps):
         if integrate:
             lo, hi = share(spring_jobs, member, size)
             for job in range(lo, hi):
@@ -301,10 +303,12 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                         return
                     merge_bounds(col.boxes, 0.0, box)
                 skipped = reachable_colliders(box, col.spheres, col.planes, sphere_on, plane_on)
+                skipped += reachable_meshes(mesh, box, step, mesh_on)
                 if member == 0:
                     st.skips[0] += skipped
                 for c in range(lo, hi):
                     collide_chunk(pos, last, col.free, col.spheres, col.planes, col.offset, sphere_on, plane_on, c)
+                    collide_meshes_chunk(pos, last, col.free, mesh, mesh_on, step, c)
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
@@ -342,29 +346,30 @@ def _addresses(argtypes: tuple) -> tuple[int, int]:
     def meanwhile() -> None:
         if repel is not None:
             repel_slots.compile(repel)
-        run_substeps.compile((i64, *argtypes[3:8], i64, i64, i64))
+        run_substeps.compile((i64, *argtypes[3:9], i64, i64, i64))
         side_kernels()
 
     compile_elsewhere(_member, argtypes, meanwhile)
     return native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel)
 
 
-def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
+def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None, mesh: tuple | None,
                      sync: np.ndarray) -> tuple[int, int]:
     """Addresses of :func:`_member` compiled for these state groups and of the
     :func:`~clothsim.sim.selfcollide.repel_slots` it calls (0 without the spec's hash), compiled or
     loaded from the cache on first use; the second goes into ``SpecHash.repel``."""
     i64 = types.int64
-    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, sync)), i64))
+    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, mesh, sync)), i64))
 
 
 @njit(**PARALLEL)
 def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
-                 sync: np.ndarray, size: int, passes: int, member: int) -> int:
+                 mesh: tuple | None, sync: np.ndarray, size: int, passes: int, member: int) -> int:
     """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
 
     ``st``, ``spec``, ``grid`` and ``col`` are the named tuples of :mod:`clothsim.sim.state`
-    (the last three ``None`` for a pass the scene does not use). ``sync`` is
+    and ``mesh`` the :class:`~clothsim.sim.meshgrid.MeshGroup` (all but ``st`` ``None`` for a pass
+    the scene does not use; ``mesh`` needs ``col``). ``sync`` is
     :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
     :mod:`clothsim.sim.team`); the result does not depend on it. After the call
     ``sync[team.ABORT]`` set means the frame was given up half-way (restore and run it alone).
@@ -382,7 +387,7 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
             me = 0
             if working == size:
                 me = np.int64(m)
-            if call_native(member, (me, working, steps, st, spec, grid, col, sync, passes)) != 0:
+            if call_native(member, (me, working, steps, st, spec, grid, col, mesh, sync, passes)) != 0:
                 sync[FAILED] = 1
                 atomic_cas(sync, ABORT, 0, 1)
     return st.skips[0]

@@ -106,7 +106,7 @@ def post_args(sim: Any) -> tuple:
     """The correction passes' arguments, packed for :func:`clothsim.sim.passes.corrections`."""
     return (sim.pinned, sim._self_mode, sim.scene.cloth.thickness, sim.scene.simulation.simulation_steps,
             sim._cell, sim._keys, sim._slots, sim._table, sim._order, sim._stretch_limit, sim._spheres,
-            sim._planes, SURFACE_OFFSET, sim._box, sim._sphere_on, sim._plane_on)
+            sim._planes, SURFACE_OFFSET, sim._box, sim._sphere_on, sim._plane_on, sim._meshes)
 
 
 def state_of(sim: Any) -> IntegratorState:

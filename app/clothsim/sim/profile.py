@@ -40,8 +40,8 @@ class Profiler:
                 out["springs: " + ", ".join(off)] = "family disabled (absent from the spring arrays)"
         if sim._self_mode == 0:
             out["self-collision"] = "simulation.self_collision is false"
-        if len(sim._spheres) + len(sim._planes) == 0:
-            out["colliders"] = "scene has no sphere or plane"
+        if sim.collider_count == 0:
+            out["colliders"] = "scene has no sphere, plane or mesh"
         if sim._stretch_limit <= 0:
             out["provot"] = "simulation.max_stretch is null"
         if sim.pinned.any():
@@ -66,7 +66,7 @@ class Profiler:
     def _passes(self, steps: int, size: int) -> bool:
         sim = self.sim
         t = time.perf_counter
-        n_colliders = len(sim._spheres) + len(sim._planes)
+        n_colliders = sim.collider_count
         for _ in range(steps):
             for name, bit, on in (("forces+integrate", PASS_INTEGRATE, True),
                                   ("self-collision", PASS_SELF, sim._self_mode != 0),
@@ -82,6 +82,7 @@ class Profiler:
                     if bit == PASS_COLLIDERS:
                         self.collider_tests += n_colliders
                         self.collider_skips += sim.colliders_skipped - before
+            sim._tick(1)
         return True
 
     def _add(self, name: str, seconds: float) -> None:

@@ -13,6 +13,7 @@ from . import team
 from .collide import SURFACE_OFFSET
 from .frame import PASS_ALL, kernel_addresses, run_substeps
 from .jit import CHUNKS
+from .meshgrid import mesh_group
 from .selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
 from .state import ClothState, Colliders, GridHash, SpecHash
 
@@ -51,6 +52,9 @@ class Simulation:
         self._box = np.zeros(6)
         self._sphere_on = np.zeros(len(self._spheres), dtype=np.bool_)
         self._plane_on = np.zeros(len(self._planes), dtype=np.bool_)
+        # triangle meshes: packed and their grids built once (None without any)
+        self._meshes = mesh_group(scene)
+        self._time = self._frame_start = 0.0
         m = table_size(n)
         self._keys = np.zeros(n, dtype=np.int64)
         self._slots = np.zeros(n, dtype=np.int64)
@@ -209,11 +213,13 @@ class Simulation:
         elif self._self_mode == MODE_GRID:
             grid = GridHash(self.free, cloth.thickness, steps, self._cell, self._keys, self._slots, self._table,
                             self._order)
-        if len(self._spheres) + len(self._planes) > 0:
+        if self._meshes is not None:
+            self._meshes.clock[1] = dt
+        if len(self._spheres) + len(self._planes) > 0 or self._meshes is not None:
             margin = 0.0 if self._self_mode == 0 else 1.001 * (2.0 * cloth.thickness) / steps
             col = Colliders(self.free, self._spheres, self._planes, SURFACE_OFFSET, self._box, self._sphere_on,
                             self._plane_on, self._boxes, margin)
-        return st, spec, grid, col
+        return st, spec, grid, col, self._meshes
 
     # ------------------------------------------------------------------------------------------
     # Stepping
@@ -225,6 +231,27 @@ class Simulation:
         self.frame = 0
         self.colliders_skipped = 0
         self.integrator_state = None
+        self._time = self._frame_start = 0.0
+
+    @property
+    def time(self) -> float:
+        """Seconds simulated since the start (or the last :meth:`reset`): where moving colliders are."""
+        return self._time
+
+    @property
+    def collider_count(self) -> int:
+        """Spheres, planes and meshes of the scene."""
+        return len(self._spheres) + len(self._planes) + len(self.scene.meshes)
+
+    def _set_clock(self) -> None:
+        # where the next kernel call starts in time (moving meshes read it)
+        if self._meshes is not None:
+            self._meshes.clock[0] = self._time
+            self._meshes.clock[2] = 0.0
+
+    def _tick(self, steps: int) -> None:
+        """Count ``steps`` substeps as done (the clock of moving colliders)."""
+        self._time += steps * self.dt
 
     def step(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``simulation_steps`` substeps each.
@@ -247,9 +274,10 @@ class Simulation:
         ``size``; False when the team gave the frame up half-way (the state must be restored)."""
         if not self._member_at:
             self._member_at, repel = kernel_addresses(*self._kernel_args, self._sync)
-            st, spec, grid, col = self._kernel_args
+            st, spec, grid, col, mesh = self._kernel_args
             if spec is not None:
-                self._kernel_args = (st, spec._replace(repel=repel), grid, col)
+                self._kernel_args = (st, spec._replace(repel=repel), grid, col, mesh)
+        self._set_clock()
         self.colliders_skipped += run_substeps(steps, *self._kernel_args, self._sync, size, passes, self._member_at)
         if self._sync[team.FAILED]:
             raise MemoryError("the frame kernel could not allocate its work space")
@@ -262,17 +290,21 @@ class Simulation:
         if not self.uses_spec_path:
             from .integrators import advance
 
+            self._set_clock()
             advance(self, steps)
+            self._tick(steps)
             return
         size = self.team.size() if saved is not None else 1
         if not self.run_kernel(steps, PASS_ALL, size):
             self._restore(saved)
             self.run_kernel(steps, PASS_ALL, 1)
+        self._tick(steps)
 
     def _restore(self, saved: tuple) -> None:
         self._pos[...] = saved[0]
         self._last[...] = saved[1]
         self.integrator_state = None if saved[2] is None else saved[2].copy()
+        self._time = self._frame_start
 
     def _advance_frame(self, run=None) -> None:  # noqa: ANN001
         """One frame through ``run(steps, saved)`` (default :meth:`_run`), under the blow-up guard."""
@@ -283,6 +315,7 @@ class Simulation:
         run = run or self._run
         state = self.integrator_state
         saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy())
+        self._frame_start = self._time
         steps = self.scene.simulation.simulation_steps
         run(steps, saved)
         if sim_blow_up_reason(self) is not None:
