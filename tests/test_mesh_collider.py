@@ -236,3 +236,16 @@ def test_other_integrators_collide_with_meshes_too(tmp_path):
     sim.step(90)
     assert _box_depth(sim.positions, center, half).min() > -0.003
     assert sim.positions[:, 1].min() < center[1] - half[1]
+
+
+def test_export_writes_the_mesh_where_it_is(tmp_path):
+    import clothsim
+
+    center, half = (0.5, 0.55, 0.5), (0.15, 0.1, 0.2)
+    path = _scene(tmp_path, box_obj(*half), {"path": "shape.obj", "translate": list(center), "friction": 0.3})
+    clothsim.export(path, tmp_path / "seq", frames=1)
+    written = parse_obj((tmp_path / "seq" / "colliders.obj").read_text())
+    assert "o mesh_0" in (tmp_path / "seq" / "colliders.obj").read_text()
+    assert written.triangles.shape == (12, 3)
+    corners = np.abs(written.vertices - center)
+    np.testing.assert_allclose(corners, np.broadcast_to(half, corners.shape), rtol=1e-6)
