@@ -114,90 +114,94 @@ def segment_hits(lx: float, ly: float, lz: float, qx: float, qy: float, qz: floa
     return s
 
 
-@njit(**EXACT)
-def consider(mesh: tuple, t: int, l: np.ndarray, q: np.ndarray, r2: float, best: np.ndarray, ids: np.ndarray) -> None:
-    """Fold triangle ``t`` into the point's running answer.
-
-    ``best`` = [closest distance^2, closest x y z, first crossing parameter]; ``ids`` = [closest
-    triangle, its feature, crossed triangle] (-1 = none yet). Only closest points within
-    sqrt(r2) count. Ties go to the lower triangle index.
-    """
-    tri = mesh.tris[t]
-    v = mesh.verts
-    a, b, c = tri[0], tri[1], tri[2]
-    cx, cy, cz, feature = closest_on_triangle(q[0], q[1], q[2], v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1],
-                                              v[b, 2], v[c, 0], v[c, 1], v[c, 2])
-    d2 = (q[0] - cx) ** 2 + (q[1] - cy) ** 2 + (q[2] - cz) ** 2
-    if d2 <= r2 and (ids[0] < 0 or d2 < best[0] or (d2 == best[0] and t < ids[0])):
-        best[0] = d2
-        best[1] = cx
-        best[2] = cy
-        best[3] = cz
-        ids[0] = t
-        ids[1] = feature
-    s = segment_hits(l[0], l[1], l[2], q[0], q[1], q[2], v[a, 0], v[a, 1], v[a, 2], v[b, 0], v[b, 1], v[b, 2],
-                     v[c, 0], v[c, 1], v[c, 2])
-    if s >= 0.0 and (ids[2] < 0 or s < best[4] or (s == best[4] and t < ids[2])):
-        best[4] = s
-        ids[2] = t
-
-
-@njit(**EXACT)
+@njit(inline="always", **EXACT)
 def pseudo_normal(mesh: tuple, t: int, feature: int) -> tuple[float, float, float]:
     """The pseudo-normal of triangle ``t``'s ``feature`` (face, edge or vertex)."""
     if feature == FACE:
-        n = mesh.fnorm[t]
-    elif feature >= EDGE_AB:
-        n = mesh.enorm[t, feature - EDGE_AB]
-    else:
-        n = mesh.vnorm[mesh.tris[t, feature - VERTEX_A]]
-    return n[0], n[1], n[2]
+        return mesh.fnorm[t, 0], mesh.fnorm[t, 1], mesh.fnorm[t, 2]
+    if feature >= EDGE_AB:
+        k = feature - EDGE_AB
+        return mesh.enorm[t, k, 0], mesh.enorm[t, k, 1], mesh.enorm[t, k, 2]
+    v = mesh.tris[t, feature - VERTEX_A]
+    return mesh.vnorm[v, 0], mesh.vnorm[v, 1], mesh.vnorm[v, 2]
+
+
+@njit(inline="always", **EXACT)
+def resolve(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, d2: float,
+            cx: float, cy: float, cz: float, t: int, feature: int, h: int) -> tuple[bool, float, float, float]:
+    """(contact?, corrected position in the mesh frame before friction) from the closest point c
+    (distance^2 ``d2``, triangle ``t``, ``feature``; t = -1: none within reach) and the first
+    crossed triangle ``h`` (-1: none)."""
+    th = mesh.thickness
+    closed = mesh.dims[m, DIMS_CLOSED] != 0
+    if h >= 0:
+        nx, ny, nz = mesh.fnorm[h, 0], mesh.fnorm[h, 1], mesh.fnorm[h, 2]
+        v = mesh.tris[h, 0]
+        x0, y0, z0 = mesh.verts[v, 0], mesh.verts[v, 1], mesh.verts[v, 2]
+        before = (lx - x0) * nx + (ly - y0) * ny + (lz - z0) * nz
+        side = 1.0 if before >= 0.0 else -1.0
+        if not closed or side > 0.0:
+            shift = side * th - ((qx - x0) * nx + (qy - y0) * ny + (qz - z0) * nz)
+            return True, qx + nx * shift, qy + ny * shift, qz + nz * shift
+    if t < 0:
+        return False, qx, qy, qz
+    dx, dy, dz = qx - cx, qy - cy, qz - cz
+    if closed:
+        nx, ny, nz = pseudo_normal(mesh, t, feature)
+        if dx * nx + dy * ny + dz * nz < 0.0:
+            return True, cx + nx * th, cy + ny * th, cz + nz * th
+    if d2 >= th * th:
+        return False, qx, qy, qz
+    if d2 > 0.0:
+        s = th / math.sqrt(d2)
+        return True, cx + dx * s, cy + dy * s, cz + dz * s
+    nx, ny, nz = mesh.fnorm[t, 0], mesh.fnorm[t, 1], mesh.fnorm[t, 2]
+    side = th if (lx - cx) * nx + (ly - cy) * ny + (lz - cz) * nz >= 0.0 else -th
+    return True, cx + nx * side, cy + ny * side, cz + nz * side
 
 
 @njit(**EXACT)
-def resolve(mesh: tuple, m: int, l: np.ndarray, q: np.ndarray, best: np.ndarray, ids: np.ndarray,
-            out: np.ndarray) -> bool:
-    """Write the corrected position (mesh frame, before friction) into ``out``; False = no contact."""
-    th = mesh.thickness
-    closed = mesh.dims[m, DIMS_CLOSED] != 0
-    h = ids[2]
-    if h >= 0:
-        n = mesh.fnorm[h]
-        x0 = mesh.verts[mesh.tris[h, 0]]
-        before = (l[0] - x0[0]) * n[0] + (l[1] - x0[1]) * n[1] + (l[2] - x0[2]) * n[2]
-        side = 1.0 if before >= 0.0 else -1.0
-        if not closed or side > 0.0:
-            now = (q[0] - x0[0]) * n[0] + (q[1] - x0[1]) * n[1] + (q[2] - x0[2]) * n[2]
-            shift = side * th - now
-            for k in range(3):
-                out[k] = q[k] + n[k] * shift
-            return True
-    t = ids[0]
-    if t < 0:
-        return False
-    dx, dy, dz = q[0] - best[1], q[1] - best[2], q[2] - best[3]
-    if closed:
-        nx, ny, nz = pseudo_normal(mesh, t, ids[1])
-        if dx * nx + dy * ny + dz * nz < 0.0:
-            out[0] = best[1] + nx * th
-            out[1] = best[2] + ny * th
-            out[2] = best[3] + nz * th
-            return True
-    d2 = best[0]
-    if d2 >= th * th:
-        return False
-    if d2 > 0.0:
-        s = th / math.sqrt(d2)
-        out[0] = best[1] + dx * s
-        out[1] = best[2] + dy * s
-        out[2] = best[3] + dz * s
-        return True
-    n = mesh.fnorm[t]
-    before = (l[0] - best[1]) * n[0] + (l[1] - best[2]) * n[1] + (l[2] - best[3]) * n[2]
-    side = th if before >= 0.0 else -th
-    for k in range(3):
-        out[k] = best[1 + k] + n[k] * side
-    return True
+def tri_test(verts: np.ndarray, tris: np.ndarray, fnorm: np.ndarray, t: int, lx: float, ly: float, lz: float,
+             qx: float, qy: float, qz: float, r: float) -> tuple[float, float, float, float, int, float]:
+    """Triangle ``t`` against a point: (distance^2 from q, closest point, its feature, the
+    parameter where l -> q crosses the triangle or -1); distance^2 is inf for a triangle whose
+    plane is further than ``r`` from q (then nothing within r, and no crossing, since |q - l| < r)."""
+    a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
+    ax, ay, az = verts[a, 0], verts[a, 1], verts[a, 2]
+    nx, ny, nz = fnorm[t, 0], fnorm[t, 1], fnorm[t, 2]
+    dq = (qx - ax) * nx + (qy - ay) * ny + (qz - az) * nz
+    if dq > r or dq < -r:
+        return np.inf, 0.0, 0.0, 0.0, -1, -1.0
+    bx, by, bz = verts[b, 0], verts[b, 1], verts[b, 2]
+    cx, cy, cz = verts[c, 0], verts[c, 1], verts[c, 2]
+    px, py, pz, feature = closest_on_triangle(qx, qy, qz, ax, ay, az, bx, by, bz, cx, cy, cz)
+    d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
+    dl = (lx - ax) * nx + (ly - ay) * ny + (lz - az) * nz
+    if (dq > 0.0 and dl > 0.0) or (dq < 0.0 and dl < 0.0):
+        return d2, px, py, pz, feature, -1.0  # both ends strictly on one side: no crossing
+    return d2, px, py, pz, feature, segment_hits(lx, ly, lz, qx, qy, qz, ax, ay, az, bx, by, bz, cx, cy, cz)
+
+
+@njit(**EXACT)
+def _far(tbox: np.ndarray, t: int, qx: float, qy: float, qz: float, r: float) -> bool:
+    # A triangle whose bounding box is further than r from q in some axis can neither be within r
+    # (too far) nor be crossed (the segment lies within |q - l| < r of q): passed over untested.
+    return (qx + r < tbox[t, 0] or qx - r > tbox[t, 3] or qy + r < tbox[t, 1] or qy - r > tbox[t, 4]
+            or qz + r < tbox[t, 2] or qz - r > tbox[t, 5])
+
+
+@njit(**EXACT)
+def _fold(t: int, d2: float, px: float, py: float, pz: float, feature: int, s: float, r2: float, bd2: float,
+          bpx: float, bpy: float, bpz: float, bt: int, bf: int, bs: float, bh: int
+          ) -> tuple[float, float, float, float, int, int, float, int]:
+    """The running answer after triangle ``t``: closest within sqrt(r2) (distance^2, point,
+    triangle, feature) and first crossing (parameter, triangle); -1 = none. Ties go to the lower
+    triangle index, so the order triangles come in does not matter."""
+    if d2 <= r2 and (bt < 0 or d2 < bd2 or (d2 == bd2 and t < bt)):
+        bd2, bpx, bpy, bpz, bt, bf = d2, px, py, pz, t, feature
+    if s >= 0.0 and (bh < 0 or s < bs or (s == bs and t < bh)):
+        bs, bh = s, t
+    return bd2, bpx, bpy, bpz, bt, bf, bs, bh
 
 
 @njit(**EXACT)
@@ -206,45 +210,53 @@ def _cell(x: float, lo: float, inv_h: float, n: int) -> int:
     return 0 if c < 0 else (n - 1 if c > n - 1 else c)
 
 
-@njit(**EXACT)
-def point_contact(mesh: tuple, m: int, l: np.ndarray, q: np.ndarray, brute: bool, best: np.ndarray,
-                  ids: np.ndarray, out: np.ndarray) -> bool:
-    """Collide one point (mesh frame: last ``l``, now ``q``) with mesh ``m``; the corrected
-    position, before friction, goes into ``out``. ``brute`` tests every triangle instead of the
-    grid's (same answer)."""
-    info = mesh.info[m]
-    dims = mesh.dims[m]
-    move2 = (q[0] - l[0]) ** 2 + (q[1] - l[1]) ** 2 + (q[2] - l[2]) ** 2
-    r = mesh.thickness + math.sqrt(move2)
-    for k in range(3):
-        if q[k] + r < info[INFO_LO + k] or q[k] - r > info[INFO_HI + k]:
-            return False
-    ids[0] = -1
-    ids[1] = -1
-    ids[2] = -1
-    best[0] = 0.0
-    best[4] = 0.0
+@njit(inline="always", **EXACT)
+def point_contact(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float,
+                  brute: bool) -> tuple[bool, float, float, float]:
+    """Collide one point (mesh frame: last ``l``, now ``q``) with mesh ``m``: (contact?, the
+    corrected position before friction). ``brute`` tests every triangle instead of the grid's
+    (same answer)."""
+    info = mesh.info
+    dims = mesh.dims
+    r = mesh.thickness + math.sqrt((qx - lx) ** 2 + (qy - ly) ** 2 + (qz - lz) ** 2)
+    if (qx + r < info[m, INFO_LO] or qx - r > info[m, INFO_HI] or qy + r < info[m, INFO_LO + 1]
+            or qy - r > info[m, INFO_HI + 1] or qz + r < info[m, INFO_LO + 2] or qz - r > info[m, INFO_HI + 2]):
+        return False, qx, qy, qz
+    verts = mesh.verts
+    tris = mesh.tris
+    tbox = mesh.tbox
+    fnorm = mesh.fnorm
     r2 = r * r
+    bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
     if brute:
-        for t in range(dims[DIMS_TRI0], dims[DIMS_TRI1]):
-            consider(mesh, t, l, q, r2, best, ids)
+        for t in range(dims[m, DIMS_TRI0], dims[m, DIMS_TRI1]):
+            if not _far(tbox, t, qx, qy, qz, r):
+                d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
+                bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy, bpz, bt,
+                                                           bf, bs, bh)
     else:
-        inv_h = info[INFO_INV_H]
-        nx, ny, nz = dims[DIMS_N], dims[DIMS_N + 1], dims[DIMS_N + 2]
-        x0 = _cell(q[0] - r, info[INFO_LO], inv_h, nx)
-        x1 = _cell(q[0] + r, info[INFO_LO], inv_h, nx)
-        y0 = _cell(q[1] - r, info[INFO_LO + 1], inv_h, ny)
-        y1 = _cell(q[1] + r, info[INFO_LO + 1], inv_h, ny)
-        z0 = _cell(q[2] - r, info[INFO_LO + 2], inv_h, nz)
-        z1 = _cell(q[2] + r, info[INFO_LO + 2], inv_h, nz)
-        base = dims[DIMS_CELL0]
+        inv_h = info[m, INFO_INV_H]
+        nx, ny, nz = dims[m, DIMS_N], dims[m, DIMS_N + 1], dims[m, DIMS_N + 2]
+        x0 = _cell(qx - r, info[m, INFO_LO], inv_h, nx)
+        x1 = _cell(qx + r, info[m, INFO_LO], inv_h, nx)
+        y0 = _cell(qy - r, info[m, INFO_LO + 1], inv_h, ny)
+        y1 = _cell(qy + r, info[m, INFO_LO + 1], inv_h, ny)
+        z0 = _cell(qz - r, info[m, INFO_LO + 2], inv_h, nz)
+        z1 = _cell(qz + r, info[m, INFO_LO + 2], inv_h, nz)
+        base = dims[m, DIMS_CELL0]
+        cell_start = mesh.cell_start
+        cell_tris = mesh.cell_tris
         for cz in range(z0, z1 + 1):
             for cy in range(y0, y1 + 1):
                 for cx in range(x0, x1 + 1):
                     cell = base + (cz * ny + cy) * nx + cx
-                    for e in range(mesh.cell_start[cell], mesh.cell_start[cell + 1]):
-                        consider(mesh, mesh.cell_tris[e], l, q, r2, best, ids)
-    return resolve(mesh, m, l, q, best, ids, out)
+                    for e in range(cell_start[cell], cell_start[cell + 1]):
+                        t = cell_tris[e]
+                        if not _far(tbox, t, qx, qy, qz, r):
+                            d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
+                            bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy,
+                                                                       bpz, bt, bf, bs, bh)
+    return resolve(mesh, m, lx, ly, lz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
 
 
 @njit(**EXACT)
@@ -260,19 +272,16 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
     """Collide the points ``free`` with mesh ``m`` translated by ``before`` at the substep's start
     and ``after`` at its end, in place."""
     keep = 1.0 - mesh.info[m, INFO_FRICTION]
-    l = np.empty(3)
-    q = np.empty(3)
-    out = np.empty(3)
-    best = np.empty(5)
-    ids = np.empty(3, dtype=np.int64)
+    bx, by, bz = before[0], before[1], before[2]
+    ax, ay, az = after[0], after[1], after[2]
     for k in range(free.shape[0]):
         p = free[k]
-        for c in range(3):
-            l[c] = last[c, p] - before[c]
-            q[c] = pos[c, p] - after[c]
-        if point_contact(mesh, m, l, q, brute, best, ids, out):
-            for c in range(3):
-                pos[c, p] = after[c] + l[c] + (out[c] - l[c]) * keep
+        lx, ly, lz = last[0, p] - bx, last[1, p] - by, last[2, p] - bz
+        hit, ox, oy, oz = point_contact(mesh, m, lx, ly, lz, pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az, brute)
+        if hit:
+            pos[0, p] = ax + lx + (ox - lx) * keep
+            pos[1, p] = ay + ly + (oy - ly) * keep
+            pos[2, p] = az + lz + (oz - lz) * keep
 
 
 @njit(**EXACT)

@@ -35,6 +35,7 @@ class MeshGroup(NamedTuple):
 
     verts: np.ndarray  # (V, 3) scaled and rotated, before the translation
     tris: np.ndarray  # (T, 3) int64, outward-wound for a closed mesh
+    tbox: np.ndarray  # (T, 6) each triangle's bounding box: lo xyz, hi xyz
     fnorm: np.ndarray  # (T, 3) unit face normals
     enorm: np.ndarray  # (T, 3, 3) unit edge pseudo-normals, edge k = corner k -> corner k+1
     vnorm: np.ndarray  # (V, 3) unit angle-weighted vertex pseudo-normals
@@ -159,7 +160,11 @@ def mesh_group(scene: Scene) -> MeshGroup | None:
     cell_start = np.concatenate([*starts, [sum(c.size for c in cells)]]).astype(np.int64)
     thickness = scene.cloth.thickness
     dt = 1.0 / (scene.simulation.frames_per_sec * scene.simulation.simulation_steps)
-    return MeshGroup(np.ascontiguousarray(np.concatenate(verts)), np.ascontiguousarray(np.concatenate(tris)),
+    all_verts = np.ascontiguousarray(np.concatenate(verts))
+    all_tris = np.ascontiguousarray(np.concatenate(tris))
+    corners = all_verts[all_tris]  # (T, 3, 3)
+    tbox = np.ascontiguousarray(np.concatenate([corners.min(axis=1), corners.max(axis=1)], axis=1))
+    return MeshGroup(all_verts, all_tris, tbox,
                      np.ascontiguousarray(np.concatenate(fnorm)), np.ascontiguousarray(np.concatenate(enorm)),
                      np.ascontiguousarray(np.concatenate(vnorm)), info, dims, cell_start,
                      np.ascontiguousarray(np.concatenate(cells)), np.ascontiguousarray(np.concatenate(times)),
