@@ -249,3 +249,16 @@ def test_export_writes_the_mesh_where_it_is(tmp_path):
     assert written.triangles.shape == (12, 3)
     corners = np.abs(written.vertices - center)
     np.testing.assert_allclose(corners, np.broadcast_to(half, corners.shape), rtol=1e-6)
+
+
+def test_a_runs_resolved_scene_keeps_its_meshes_and_loads_from_anywhere(tmp_path):
+    from clothsim.scene import scene_from_dict
+    from clothsim.sweeps.params import scene_json
+
+    scene = load_scene("mesh")
+    data = json.loads(json.dumps(scene_json(scene)))
+    again = scene_from_dict(data, str(tmp_path / "elsewhere.json"))  # the OBJ path is absolute there
+    (a,), (b,) = scene.meshes, again.meshes
+    assert (a.translate, a.rotation, a.scale, a.friction, a.closed) == (b.translate, b.rotation, b.scale, b.friction,
+                                                                       b.closed)
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.triangles, b.triangles)

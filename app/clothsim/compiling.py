@@ -208,7 +208,9 @@ def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], 
 # Ahead of time
 
 
-def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet", damping_mode: str = "spec"):
+def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet", damping_mode: str = "spec",
+                meshes: bool = False):
+    from .resources import data_dir
     from .scene import scene_from_dict
 
     data: dict[str, Any] = {
@@ -220,12 +222,15 @@ def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet"
     if colliders:
         data["sphere"] = {"origin": [0.5, 0.5, 0.5], "radius": 0.2, "friction": 0.3}
         data["plane"] = {"point": [0, 0, 0], "normal": [0, 1, 0], "friction": 0.5}
+    if meshes:
+        data["mesh"] = {"path": str(data_dir("scenes") / "torus.obj"), "translate": [0.5, 0.5, 0.5], "friction": 0.3}
     return scene_from_dict(data, "<compile>")
 
 
 def work_items() -> list[tuple[str, Callable[[], None]]]:
     """Everything ``clothsim compile`` compiles: each frame-kernel plan (self-collision mode x
-    colliders), each other integrator, the rest detector and the renderer's mesh kernel."""
+    colliders), the bundled mesh scene's, each other integrator, the rest detector and the
+    renderer's mesh kernel."""
     from .sim import Simulation
 
     def step(scene) -> Callable[[], None]:  # noqa: ANN001
@@ -236,6 +241,8 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
     items += [(f"integrator {name}", step(_tiny_scene("spec", True, name)))
               for name in ("symplectic_euler", "implicit_euler", "xpbd")]
     items.append(("verlet, rate damping", step(_tiny_scene("spec", True, "verlet", "rate"))))
+    # the bundled mesh scene's plan (other mesh plans compile on first use)
+    items.append(("frame kernel: self-collision spec, colliders and meshes", step(_tiny_scene("spec", True, meshes=True))))
 
     items.append(("guard, rest detector, render mesh", side_kernels))
     return items

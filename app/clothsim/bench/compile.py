@@ -23,6 +23,7 @@ COMMANDS: dict[str, list[str]] = {
     "sphere": ["simulate", "sphere", "--frames", "10", "--out", "{tmp}/s.npz"],
     "grid": ["simulate", "pinned2", "--self-collision", "grid", "--frames", "10", "--out", "{tmp}/s.npz"],
     "xpbd": ["simulate", "pinned2", "--integrator", "xpbd", "--frames", "10", "--out", "{tmp}/s.npz"],
+    "mesh": ["simulate", "mesh", "--frames", "10", "--out", "{tmp}/s.npz"],
 }
 _RUNNER = ("import sys; from clothsim.compiling import record_command; "
            "sys.exit(record_command(sys.argv[1], sys.argv[2:]))")

@@ -14,7 +14,10 @@ passes, and a new feature adds a field or a group, not a dozen positional argume
 
 Colliders are tested against the cloth's bounding box first: a sphere the box does not reach, or
 a plane the box (of current and last positions) lies wholly on one side of, cannot act this
-substep and is skipped exactly.
+substep and is skipped exactly. Triangle meshes come as a group of their own
+(:class:`~clothsim.sim.meshgrid.MeshGroup`, after the spheres and planes of each point's chunk);
+their pass is called by address, like the spec hash's query, so that it compiles beside the member
+and is not re-optimised inside it.
 """
 
 from __future__ import annotations
@@ -308,7 +311,8 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     st.skips[0] += skipped
                 for c in range(lo, hi):
                     collide_chunk(pos, last, col.free, col.spheres, col.planes, col.offset, sphere_on, plane_on, c)
-                    collide_meshes_chunk(pos, last, col.free, mesh, mesh_on, step, c)
+                    if mesh is not None:
+                        call_native(mesh.collide, (pos, last, col.free, mesh, mesh_on, np.int64(step), np.int64(c)))
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
@@ -328,7 +332,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
 
 
 @lru_cache(maxsize=None)
-def _addresses(argtypes: tuple) -> tuple[int, int]:
+def _addresses(argtypes: tuple) -> tuple[int, int, int]:
     from ..compiling import compile_elsewhere, side_kernels
 
     st, spec = argtypes[3], argtypes[4]
@@ -343,21 +347,33 @@ def _addresses(argtypes: tuple) -> tuple[int, int]:
         repel = (st.types[st.fields.index("pos")], field("movable"), field("dist"), field("sim_steps"),
                  *(field(n) for n in ("start", "order", "busy", "xs", "ys", "zs", "ks")), i64, i64)
 
+    collide = None
+    col, mesh = argtypes[6], argtypes[7]
+    if mesh != types.none:
+        # the mesh pass too: compiled here meanwhile, and kept out of the member's module
+        collide = (st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
+                   col.types[col.fields.index("free")], mesh, types.Array(types.bool_, 1, "C"), i64, i64)
+
     def meanwhile() -> None:
         if repel is not None:
             repel_slots.compile(repel)
+        if collide is not None:
+            collide_meshes_chunk.compile(collide)
         run_substeps.compile((i64, *argtypes[3:9], i64, i64, i64))
         side_kernels()
 
     compile_elsewhere(_member, argtypes, meanwhile)
-    return native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel)
+    return (native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel),
+            0 if collide is None else native_address(collide_meshes_chunk, collide))
 
 
 def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None, mesh: tuple | None,
-                     sync: np.ndarray) -> tuple[int, int]:
-    """Addresses of :func:`_member` compiled for these state groups and of the
-    :func:`~clothsim.sim.selfcollide.repel_slots` it calls (0 without the spec's hash), compiled or
-    loaded from the cache on first use; the second goes into ``SpecHash.repel``."""
+                     sync: np.ndarray) -> tuple[int, int, int]:
+    """Addresses of :func:`_member` compiled for these state groups, of the
+    :func:`~clothsim.sim.selfcollide.repel_slots` it calls (0 without the spec's hash) and of the
+    :func:`~clothsim.sim.meshcollide.collide_meshes_chunk` it calls (0 without meshes), compiled or
+    loaded from the cache on first use; the second goes into ``SpecHash.repel``, the third into
+    ``MeshGroup.collide``."""
     i64 = types.int64
     return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, mesh, sync)), i64))
 

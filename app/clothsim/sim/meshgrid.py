@@ -48,6 +48,8 @@ class MeshGroup(NamedTuple):
     velocity: np.ndarray  # (M, 3) translation velocity after the last keyframe
     clock: np.ndarray  # (3,) time at the start of the kernel call, substep length, substeps done (other integrators)
     thickness: float
+    #: address of the mesh pass compiled for this group (see :func:`clothsim.sim.frame.kernel_addresses`); 0 until known
+    collide: int = 0
 
 
 def _unit_rows(v: np.ndarray) -> np.ndarray:

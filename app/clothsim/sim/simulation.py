@@ -239,6 +239,16 @@ class Simulation:
         return self._time
 
     @property
+    def colliders_still_after(self) -> float:
+        """Time (s) after which no collider moves any more (inf for a constant velocity): a cloth
+        is not taken to be at rest before then, since a collider may still come and move it."""
+        end = 0.0
+        for spec in self.scene.meshes:
+            if spec.motion is not None:
+                end = max(end, float("inf") if spec.motion.velocity is not None else spec.motion.keyframes[-1][0])
+        return end
+
+    @property
     def collider_count(self) -> int:
         """Spheres, planes and meshes of the scene."""
         return len(self._spheres) + len(self._planes) + len(self.scene.meshes)
@@ -273,10 +283,13 @@ class Simulation:
         """Run ``steps`` substeps of the frame kernel (only the ``passes`` bits) with a team of
         ``size``; False when the team gave the frame up half-way (the state must be restored)."""
         if not self._member_at:
-            self._member_at, repel = kernel_addresses(*self._kernel_args, self._sync)
+            self._member_at, repel, collide = kernel_addresses(*self._kernel_args, self._sync)
             st, spec, grid, col, mesh = self._kernel_args
             if spec is not None:
-                self._kernel_args = (st, spec._replace(repel=repel), grid, col, mesh)
+                spec = spec._replace(repel=repel)
+            if mesh is not None:
+                mesh = mesh._replace(collide=collide)
+            self._kernel_args = (st, spec, grid, col, mesh)
         self._set_clock()
         self.colliders_skipped += run_substeps(steps, *self._kernel_args, self._sync, size, passes, self._member_at)
         if self._sync[team.FAILED]:

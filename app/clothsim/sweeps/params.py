@@ -254,6 +254,7 @@ def scene_json(scene: Scene) -> dict[str, Any]:
         "cloth": cloth,
         "sphere": [dataclasses.asdict(s) for s in scene.spheres],
         "plane": [dataclasses.asdict(p) for p in scene.planes],
+        **({"mesh": [m.as_json() for m in scene.meshes]} if scene.meshes else {}),
         "simulation": dataclasses.asdict(scene.simulation),
         **({"render": scene.render} if scene.render is not None else {}),
     }
