@@ -70,7 +70,7 @@ def test_compile_compiles_everything_ahead_of_time(tmp_path: Path) -> None:
     lines = first.stdout.splitlines()
     assert lines[0].split()[:2] == ["work", "item"]
     items = [line for line in lines[1:-1]]
-    assert len(items) == 14 and any("self-collision grid, colliders" in i for i in items)
+    assert len(items) == 15 and any("self-collision grid, colliders" in i for i in items)
     assert any("bundled scene tablecloth" in i for i in items)
     assert lines[-1].startswith("total")
     # afterwards no command needs a compile: running it again loads every kernel

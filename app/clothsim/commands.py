@@ -124,7 +124,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             else:
                 sim.step()
             bar.update()
-            if rest is not None and rest.update(sim._pos):
+            if rest is not None and rest.update(sim._pos) and sim.time >= sim.colliders_still_after:
                 rested_at = sim.frame
                 break
     elapsed = time.perf_counter() - start

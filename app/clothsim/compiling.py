@@ -99,7 +99,8 @@ def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], 
 
 
 def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet", damping_mode: str = "spec",
-                wind: bool = False, pin_motion: bool = False):
+                wind: bool = False, pin_motion: bool = False, meshes: bool = False):
+    from .resources import data_dir
     from .scene import scene_from_dict
 
     data: dict[str, Any] = {
@@ -115,14 +116,16 @@ def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet"
         data["wind"] = {"velocity": [1, 0, 0], "turbulence": 1}
     if pin_motion:
         data["cloth"]["pin_motion"] = {"velocity": [0, 0.1, 0]}
+    if meshes:
+        data["mesh"] = {"path": str(data_dir("scenes") / "torus.obj"), "translate": [0.5, 0.5, 0.5], "friction": 0.3}
     return scene_from_dict(data, "<compile>")
 
 
 def work_items() -> list[tuple[str, Callable[[], None]]]:
     """Everything ``clothsim compile`` compiles: each frame-kernel plan (self-collision mode x
     colliders; wind and moving pins with the spec's self-collision, as the bundled ``flag`` uses),
-    the plans of the bundled capsule, box and moving-collider scenes, each other integrator, the
-    rest detector and the renderer's mesh kernel."""
+    the plans of the bundled capsule, box, moving-collider and mesh scenes, each other integrator,
+    the rest detector and the renderer's mesh kernel."""
     from .sim import Simulation
 
     def step(scene) -> Callable[[], None]:  # noqa: ANN001
@@ -141,6 +144,8 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
 
     items += [(f"frame kernel: bundled scene {name}", step(load_scene(name))) for name in ("capsule", "tablecloth",
                                                                                           "curtain")]
+    # the bundled mesh scene's plan (other mesh plans compile on first use)
+    items.append(("frame kernel: self-collision spec, colliders and meshes", step(_tiny_scene("spec", True, meshes=True))))
 
     items.append(("guard, rest detector, render mesh", side_kernels))
     return items

@@ -19,6 +19,7 @@ from typing import Any
 from . import validate as V
 from .errors import ClothsimError, SceneError
 from .motion import MOTION, MotionSpec
+from .meshcollider import MESH, MeshSpec
 from .resources import data_dir
 from .validate import SceneWarning  # noqa: F401 - warned by the rules, imported from here by users
 from .wind import WINDS, WindSpec
@@ -167,6 +168,7 @@ class Scene:
     simulation: SimulationSpec = field(default_factory=SimulationSpec)
     render: dict[str, Any] | None = None
     path: str = "<scene>"
+    meshes: tuple[MeshSpec, ...] = ()
 
     @property
     def colliders(self) -> tuple[SphereSpec | PlaneSpec | CapsuleSpec | BoxSpec, ...]:
@@ -175,8 +177,8 @@ class Scene:
 
     @property
     def moving(self) -> bool:
-        """True when any collider carries a ``motion``."""
-        return any(c.motion is not None for c in self.colliders)
+        """True when any collider (triangle meshes included) carries a ``motion``."""
+        return any(c.motion is not None for c in (*self.colliders, *self.meshes))
 
     def with_cloth(self, **changes: Any) -> "Scene":
         """A copy with some cloth fields replaced (no re-validation)."""
@@ -266,7 +268,7 @@ def scene_from_dict(data: Any, path: str = "<scene>") -> Scene:
     _check_memory(cloth, values["simulation"], path)
     return Scene(cloth=cloth, spheres=values["spheres"], planes=values["planes"], capsules=values["capsules"],
                  boxes=values["boxes"], winds=values["winds"], simulation=values["simulation"],
-                 render=values["render"], path=path)
+                 render=values["render"], path=path, meshes=values["meshes"])
 
 
 def collider_json(spec: SphereSpec | PlaneSpec | CapsuleSpec | BoxSpec) -> dict[str, Any]:
@@ -432,10 +434,11 @@ SCENE = V.record({
     "plane": V.default(V.one_or_many(V.then(PLANE, lambda v, at: PlaneSpec(**v))), (), dest="planes"),
     "capsule": V.default(V.one_or_many(V.then(CAPSULE, lambda v, at: CapsuleSpec(**v))), (), dest="capsules"),
     "box": V.default(V.one_or_many(V.then(BOX, lambda v, at: BoxSpec(**v))), (), dest="boxes"),
+    "mesh": V.default(V.one_or_many(MESH), (), dest="meshes"),
     "wind": V.default(WINDS, (), dest="winds"),
     "simulation": V.default(_simulation, _SIM_DEFAULTS, dest="simulation"),
     "render": V.default(_render, None),
-}, unknown="unknown top-level object (expected one of: cloth, sphere, plane, capsule, box, wind, simulation, render)")
+}, unknown="unknown top-level object (expected one of: cloth, sphere, plane, capsule, box, mesh, wind, simulation, render)")
 
 
 # ----------------------------------------------------------------------------------------------

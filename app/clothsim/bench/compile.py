@@ -26,6 +26,7 @@ COMMANDS: dict[str, list[str]] = {
     "flag": ["simulate", "flag", "--frames", "10", "--out", "{tmp}/s.npz"],
     "capsule": ["simulate", "capsule", "--frames", "10", "--out", "{tmp}/s.npz"],
     "tablecloth": ["simulate", "tablecloth", "--frames", "10", "--out", "{tmp}/s.npz"],
+    "mesh": ["simulate", "mesh", "--frames", "10", "--out", "{tmp}/s.npz"],
 }
 _RUNNER = ("import sys; from clothsim.compiling import record_command; "
            "sys.exit(record_command(sys.argv[1], sys.argv[2:]))")

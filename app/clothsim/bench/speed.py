@@ -45,13 +45,16 @@ def run(args: argparse.Namespace) -> int:
         check(integer(ge=low), value, flag)
     names = args.scenes or bundled_scene_names()
     scenes = [load_scene(name) for name in names]  # a bad name fails before any timing
-    print(f"{'scene':<15}{'self-coll.':>11}{'ms/frame':>10}{'substeps/s':>12}{'x realtime':>11}"
-          f"{'numpy ms':>10}{'speedup':>9}")
+    # A scene with wind or triangle meshes is timed again without them, in the same run: their cost.
     rows = []
     for name, scene in zip(names, scenes):
         rows.append((name, scene))
-        if scene.winds:  # the same scene in still air: what the wind costs
+        if scene.winds:
             rows.append((f"{name} -wind", dataclasses.replace(scene, winds=())))
+        if scene.meshes:
+            rows.append((f"{name} -mesh", dataclasses.replace(scene, meshes=())))
+    print(f"{'scene':<15}{'self-coll.':>11}{'ms/frame':>10}{'substeps/s':>12}{'x realtime':>11}"
+          f"{'numpy ms':>10}{'speedup':>9}")
     for name, scene in rows:
         for mode in ("off", "spec"):
             sc = scene.with_simulation(self_collision=mode)
@@ -63,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
             base = ""
             ratio = ""
             # the baseline knows only the course's static spheres and planes
-            if mode == "off" and not (scene.capsules or scene.boxes or scene.moving):
+            if mode == "off" and not (scene.capsules or scene.boxes or scene.moving or sc.meshes):
                 baseline = NumpyCloth(Simulation(sc))
                 baseline_ms = median_ms_per_frame(baseline.frame, args.baseline_frames, 3)
                 base = f"{baseline_ms:.1f}"
@@ -71,6 +74,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"{name:<15}{mode:>11}{ms:>10.3f}{steps * 1e3 / ms:>12.0f}{realtime:>10.1f}x{base:>10}{ratio:>9}",
                   flush=True)
     print("medians of repeats; numpy = vectorised NumPy baseline of the same step without self-collision "
-          "(and without wind; none for scenes with capsules, boxes or moving colliders); '-wind': the scene above "
-          "in still air")
+          "(and without wind; none for scenes with capsules, boxes, meshes or moving colliders); NAME -wind: the "
+          "scene above in still air; NAME -mesh: without its meshes")
     return 0

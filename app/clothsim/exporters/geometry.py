@@ -123,8 +123,20 @@ def _boxes(scene: Scene) -> Iterator[Collider]:
         yield Collider(f"box_{k}", _triangles(verts, idx), moving=box if box.motion is not None else None)
 
 
+def _meshes(scene: Scene) -> Iterator[Collider]:
+    # Written where the mesh is at time 0 (a moving mesh's later translations are not exported).
+    from ..render.meshcollider import mesh_collider_vertices
+
+    for k, spec in enumerate(scene.meshes):
+        verts, idx = mesh_collider_vertices(spec)
+        points = (verts[:, 0:3].astype(np.float64) + spec.track().at(0.0)).astype(np.float32)
+        mesh = MeshData(points=points, normals=np.ascontiguousarray(verts[:, 3:6]),
+                        uvs=np.ascontiguousarray(verts[:, 9:11]), faces=idx.astype(np.int64).reshape(-1, 3))
+        yield Collider(f"mesh_{k}", mesh)
+
+
 #: One function per kind of collider, in the order they are written.
-COLLIDER_KINDS: tuple[Callable[[Scene], Iterator[Collider]], ...] = (_spheres, _planes, _capsules, _boxes)
+COLLIDER_KINDS: tuple[Callable[[Scene], Iterator[Collider]], ...] = (_spheres, _planes, _capsules, _boxes, _meshes)
 
 
 def colliders(scene: Scene) -> list[Collider]:

@@ -205,7 +205,7 @@ def run_render(args: argparse.Namespace) -> int:
         sim.step(1)
         timing["simulate"] += time.perf_counter() - t0
         counts["simulated"] += 1
-        if rest is not None and rest.update(sim._pos):
+        if rest is not None and rest.update(sim._pos) and sim.time >= sim.colliders_still_after:
             rested_at = sim.frame
 
     def draw() -> Any:

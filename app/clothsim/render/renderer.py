@@ -126,6 +126,7 @@ class Renderer:
         self._spheres: dict[tuple[int, int], tuple[Any, Any, int]] = {}
         self._planes: dict[tuple[Any, ...], tuple[Any, Any, int]] = {}
         self._shapes: dict[tuple[Any, ...], tuple[Any, Any, int]] = {}
+        self._meshes: dict[int, tuple[Any, Any, Any]] = {}  # id(MeshSpec) -> (spec, vbo, ibo)
         self._vaos: dict[tuple[Any, ...], Any] = {}
         self._textures: dict[tuple[Any, ...], Any] = {}
         self._settings_for: tuple[Scene | None, RenderSettings | None] = (None, None)
@@ -426,6 +427,7 @@ class Renderer:
             self._draw_shape(prog, look, key, lambda c=capsule: mesh.capsule_mesh(
                 c.a, c.b, c.radius * SPHERE_DRAW_SCALE, *settings.sphere_resolution), shift(capsule, now))
         ctx.disable(moderngl.CULL_FACE)
+        self._draw_meshes(prog, look, sim)
         if scene.planes or scene.boxes:
             # Cloth resting on a plane or a box face sits 0.0001 above it; push them back in
             # depth so the two never fight for the same pixels.
@@ -447,6 +449,40 @@ class Renderer:
             ctx.polygon_offset = (0.0, 0.0)
         ctx.wireframe = False
         ctx.copy_framebuffer(self._fbo, self._ms_fbo)  # resolves the multisampled image
+
+    def _mesh_collider(self, spec: Any) -> tuple[Any, Any]:
+        entry = self._meshes.get(id(spec))
+        if entry is None or entry[0] is not spec:
+            from .meshcollider import mesh_collider_vertices
+
+            if entry is not None:  # another scene's mesh had this id: drop what was built for it
+                for key in [k for k in self._vaos if k[1] == "mesh" and k[2] == id(spec)]:
+                    self._vaos.pop(key).release()
+                entry[1].release()
+                entry[2].release()
+
+            verts, idx = mesh_collider_vertices(spec)
+            entry = (spec, self.ctx.buffer(verts), self.ctx.buffer(idx))
+            self._meshes[id(spec)] = entry
+        return entry[1], entry[2]
+
+    def _draw_meshes(self, prog: Any, look: str, sim: ClothState) -> None:
+        """Triangle-mesh colliders at their place at the simulation's time (culled from behind
+        when closed, both sides when open)."""
+        import moderngl
+
+        for spec in sim.scene.meshes:
+            vbo, ibo = self._mesh_collider(spec)
+            vao = self._vao(look, "mesh", id(spec), lambda p: self.ctx.vertex_array(
+                p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
+                ibo, index_element_size=4, skip_errors=True))
+            model = np.eye(4)
+            model[:3, 3] = spec.track().at(getattr(sim, "time", 0.0))
+            _set_matrix(prog, "u_model", model)
+            if spec.closed and look != "wireframe":
+                self.ctx.enable(moderngl.CULL_FACE)
+            vao.render(moderngl.TRIANGLES)
+            self.ctx.disable(moderngl.CULL_FACE)
 
     def _draw_wireframe(self, prog: Any, sim: ClothState, settings: RenderSettings,
                         buffers: _ClothBuffers) -> None:

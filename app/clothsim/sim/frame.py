@@ -14,7 +14,10 @@ passes, and a new feature adds a field or a group, not a dozen positional argume
 
 Colliders are tested against the cloth's bounding box first: a sphere the box does not reach, or
 a plane the box (of current and last positions) lies wholly on one side of, cannot act this
-substep and is skipped exactly.
+substep and is skipped exactly. Triangle meshes come as a group of their own
+(:class:`~clothsim.sim.meshgrid.MeshGroup`, after the spheres and planes of each point's chunk);
+their pass is called by address, like the spec hash's query, so that it compiles beside the member
+and is not re-optimised inside it.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from .integrate import verlet_chunk
 from .pinmotion import offset_at, pin_chunk, substep_time
 from .moving import collide_moving_planes, collide_moving_spheres, moving, reach_moving, update_poses
 from .shapes import collide_shapes, flags_for, reach_shapes
+from .meshcollide import collide_meshes_chunk, mesh_flags, reachable_meshes
 from .selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from .team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
 
@@ -214,8 +218,8 @@ def collide_reachable(pos: np.ndarray, last: np.ndarray, col: tuple, motion: tup
 
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
-            col: tuple | None, mov: tuple | None, wind: tuple | None, pins: tuple | None, sync: np.ndarray,
-            passes: int) -> None:
+            col: tuple | None, mov: tuple | None, mesh: tuple | None, wind: tuple | None, pins: tuple | None,
+            sync: np.ndarray, passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes.
 
     Returns early, with the state half-way through a substep, when a barrier reports that the
@@ -263,6 +267,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         # skipping stays exact.
         margin = 0.0 if not self_on else col.self_margin
         cols = np.empty((2, 64))
+        mesh_on = mesh_flags(mesh)
     if pins is not None:
         offset = np.empty(3)
     gen = np.int64(0)
@@ -370,11 +375,14 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     merge_bounds(col.boxes, 0.0, box)
                 skipped = reach_colliders(box, col, sphere_on, plane_on, capsule_on, cuboid_on, mov, col.capsules,
                                           col.cuboids)
+                skipped += reachable_meshes(mesh, box, substep, mesh_on)
                 if member == 0:
                     st.skips[0] += skipped
                 for c in range(lo, hi):
                     collide_part(pos, last, col, sphere_on, plane_on, capsule_on, cuboid_on, mov, col.capsules,
                                  col.cuboids, c)
+                    if mesh is not None:
+                        call_native(mesh.collide, (pos, last, col.free, mesh, mesh_on, np.int64(substep), np.int64(c)))
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
@@ -394,7 +402,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
 
 
 @lru_cache(maxsize=None)
-def _addresses(argtypes: tuple) -> tuple[int, int]:
+def _addresses(argtypes: tuple) -> tuple[int, int, int]:
     from ..compiling import compile_elsewhere, side_kernels
 
     st, spec = argtypes[3], argtypes[4]
@@ -409,35 +417,50 @@ def _addresses(argtypes: tuple) -> tuple[int, int]:
         repel = (st.types[st.fields.index("pos")], field("movable"), field("dist"), field("sim_steps"),
                  *(field(n) for n in ("start", "order", "busy", "xs", "ys", "zs", "ks")), i64, i64)
 
+    collide = None
+    col, mesh = argtypes[6], argtypes[8]  # (i64, i64, i64, st, spec, grid, col, mov, mesh, wind, pins, sync, i64)
+    if mesh != types.none:
+        # the mesh pass too: compiled here meanwhile, and kept out of the member's module
+        collide = (st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
+                   col.types[col.fields.index("free")], mesh, types.Array(types.bool_, 1, "C"), i64, i64)
+
     def meanwhile() -> None:
         if repel is not None:
             repel_slots.compile(repel)
-        run_substeps.compile((i64, *argtypes[3:11], i64, i64, i64))
+        if collide is not None:
+            collide_meshes_chunk.compile(collide)
+        run_substeps.compile((i64, *argtypes[3:12], i64, i64, i64))
         side_kernels()
 
     compile_elsewhere(_member, argtypes, meanwhile)
-    return native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel)
+    return (native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel),
+            0 if collide is None else native_address(collide_meshes_chunk, collide))
 
 
 def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None, mov: tuple | None,
-                     wind: tuple | None, pins: tuple | None, sync: np.ndarray) -> tuple[int, int]:
-    """Addresses of :func:`_member` compiled for these state groups and of the
-    :func:`~clothsim.sim.selfcollide.repel_slots` it calls (0 without the spec's hash), compiled or
-    loaded from the cache on first use; the second goes into ``SpecHash.repel``."""
+                     mesh: tuple | None, wind: tuple | None, pins: tuple | None,
+                     sync: np.ndarray) -> tuple[int, int, int]:
+    """Addresses of :func:`_member` compiled for these state groups, of the
+    :func:`~clothsim.sim.selfcollide.repel_slots` it calls (0 without the spec's hash) and of the
+    :func:`~clothsim.sim.meshcollide.collide_meshes_chunk` it calls (0 without meshes), compiled or
+    loaded from the cache on first use; the second goes into ``SpecHash.repel``, the third into
+    ``MeshGroup.collide``."""
     i64 = types.int64
-    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, mov, wind, pins, sync)), i64))
+    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, mov, mesh, wind, pins, sync)),
+                       i64))
 
 
 @njit(**PARALLEL)
 def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
-                 mov: tuple | None, wind: tuple | None, pins: tuple | None, sync: np.ndarray, size: int, passes: int,
-                 member: int) -> int:
+                 mov: tuple | None, mesh: tuple | None, wind: tuple | None, pins: tuple | None, sync: np.ndarray,
+                 size: int, passes: int, member: int) -> int:
     """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
 
     ``st``, ``spec``, ``grid``, ``col``, ``wind`` and ``pins`` are the named tuples of
-    :mod:`clothsim.sim.state` and ``mov`` the tracks of moving colliders
-    (:class:`clothsim.sim.moving.Motion`); all but ``st`` are ``None`` for a pass the scene does
-    not use. ``sync`` is
+    :mod:`clothsim.sim.state`, ``mov`` the tracks of moving colliders
+    (:class:`clothsim.sim.moving.Motion`) and ``mesh`` the
+    :class:`~clothsim.sim.meshgrid.MeshGroup`; all but ``st`` are ``None`` for a pass the scene
+    does not use (``mesh`` needs ``col``). ``sync`` is
     :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
     :mod:`clothsim.sim.team`); the result does not depend on it. After the call
     ``sync[team.ABORT]`` set means the frame was given up half-way (restore and run it alone).
@@ -455,7 +478,7 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
             me = 0
             if working == size:
                 me = np.int64(m)
-            if call_native(member, (me, working, steps, st, spec, grid, col, mov, wind, pins, sync, passes)) != 0:
+            if call_native(member, (me, working, steps, st, spec, grid, col, mov, mesh, wind, pins, sync, passes)) != 0:
                 sync[FAILED] = 1
                 atomic_cas(sync, ABORT, 0, 1)
     return st.skips[0]

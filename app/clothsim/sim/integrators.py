@@ -104,7 +104,7 @@ class IntegratorState:
 def post_args(sim: Any) -> tuple:
     """The correction passes' arguments, packed for :func:`clothsim.sim.passes.corrections`."""
     return (sim.pinned, sim._self_mode, sim.scene.cloth.thickness, sim.scene.simulation.simulation_steps,
-            sim._cell, sim._keys, sim._slots, sim._table, sim._order, sim._stretch_limit, *sim._kernel_args[3:5])
+            sim._cell, sim._keys, sim._slots, sim._table, sim._order, sim._stretch_limit, *sim._kernel_args[3:6])
 
 
 def state_of(sim: Any) -> IntegratorState:
@@ -140,7 +140,7 @@ def _advance(sim: Any, steps: int) -> None:
     fix = has_corrections(post)
     f, phi, c = damping_factors(sim)
     dt = sim.dt
-    wind, pins = sim._kernel_args[5], sim._kernel_args[6]  # (st, spec, grid, col, mov, wind, pins)
+    wind, pins = sim._kernel_args[6], sim._kernel_args[7]  # (st, spec, grid, col, mov, mesh, wind, pins)
     if name == "verlet":
         if not st.started:
             accumulate_forces(sim._pos, sim._forces, sim._stream, sim.mass, sim._gravity)

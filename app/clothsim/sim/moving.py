@@ -85,10 +85,10 @@ def pack_motion(scene: Any) -> Motion | None:
 def top_speed(scene: Any) -> float:
     """The highest speed (m/s) any of ``scene``'s colliders ever moves at (0 when none moves)."""
     top = 0.0
-    for spec in scene.colliders:
+    for spec in (*scene.colliders, *scene.meshes):
         if spec.motion is None:
             continue
-        track = spec.motion.track(spec.anchor)
+        track = spec.motion.track()  # a speed: the same from any start
         top = max(top, float(np.linalg.norm(track.velocity)))
         if len(track.times) > 1:
             steps = np.linalg.norm(np.diff(track.points, axis=0), axis=1) / np.diff(track.times)

@@ -41,10 +41,10 @@ class Profiler:
         if sim._self_mode == 0:
             out["self-collision"] = "simulation.self_collision is false"
         if sim.n_colliders == 0:
-            out["colliders"] = "scene has no sphere, plane, capsule or box"
-        if sim._kernel_args[5] is None:  # (st, spec, grid, col, mov, wind, pins)
+            out["colliders"] = "scene has no sphere, plane, capsule, box or mesh"
+        if sim._kernel_args[6] is None:  # (st, spec, grid, col, mov, mesh, wind, pins)
             out["wind"] = "scene has no wind (or only still air)"
-        if sim._kernel_args[6] is None:
+        if sim._kernel_args[7] is None:
             out["moving pins"] = "cloth has no pin_motion"
         if sim._stretch_limit <= 0:
             out["provot"] = "simulation.max_stretch is null"

@@ -18,6 +18,7 @@ from .jit import CHUNKS
 from .pinmotion import move_pins
 from .moving import pack_motion, top_speed
 from .shapes import collider_rows
+from .meshgrid import mesh_group
 from .selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
 from .state import ClothState, Colliders, GridHash, PinMotion, SpecHash, Wind
 
@@ -63,6 +64,8 @@ class Simulation:
         self._motion = pack_motion(scene)
         #: Top speed of the moving colliders (m/s): the blow-up guard allows the energy they give.
         self.collider_top_speed = top_speed(scene)
+        # triangle meshes: packed and their grids built once (None without any)
+        self._meshes = mesh_group(scene)
         m = table_size(n)
         self._keys = np.zeros(n, dtype=np.int64)
         self._slots = np.zeros(n, dtype=np.int64)
@@ -250,12 +253,14 @@ class Simulation:
         elif self._self_mode == MODE_GRID:
             grid = GridHash(self.free, cloth.thickness, steps, self._cell, self._keys, self._slots, self._table,
                             self._order)
+        if self._meshes is not None:
+            self._meshes.clock[1] = dt
         if self.n_colliders > 0:
             margin = 0.0 if self._self_mode == 0 else 1.001 * (2.0 * cloth.thickness) / steps
             col = Colliders(self.free, self._spheres, self._planes, SURFACE_OFFSET, self._box, self._sphere_on,
                             self._plane_on, self._boxes, margin, self._capsules, self._cuboids, self._capsule_on,
                             self._cuboid_on)
-        return st, spec, grid, col, self._motion, self._wind_group(), self._pin_group()
+        return st, spec, grid, col, self._motion, self._meshes, self._wind_group(), self._pin_group()
 
     def _wind_group(self) -> Wind | None:
         rows, modes = wind_rows(self.scene.winds)
@@ -281,7 +286,7 @@ class Simulation:
     def _place_pins(self) -> None:
         """At the start, the whole cloth moved by the pins' offset at time 0, at rest: the pins are
         then at rest + offset(0) with no jump in the first substep."""
-        pm = self._kernel_args[6]
+        pm = self._kernel_args[7]
         if pm is not None:
             offset = np.empty(3)
             move_pins(self._pos, self._last, pm, self.time, offset)
@@ -290,15 +295,32 @@ class Simulation:
 
     @property
     def n_colliders(self) -> int:
-        """Colliders of every kind in the scene."""
-        return sum(0 if r is None else len(r) for r in self._rows)
+        """Colliders of every kind in the scene (triangle meshes count one each)."""
+        return sum(0 if r is None else len(r) for r in self._rows) + len(self.scene.meshes)
+
+    @property
+    def colliders_still_after(self) -> float:
+        """Time (s) after which nothing that drives the cloth moves any more: colliders and pins
+        (inf for a constant velocity). A cloth is not taken to be at rest before then, since a
+        collider or a pin may still come and move it."""
+        end = 0.0
+        motions = [spec.motion for kind in (self.scene.spheres, self.scene.planes, self.scene.capsules,
+                                            self.scene.boxes, self.scene.meshes) for spec in kind]
+        for motion in [*motions, self.scene.cloth.pin_motion]:
+            if motion is not None:
+                end = max(end, float("inf") if motion.velocity is not None else motion.keyframes[-1][0])
+        return end
 
     def _start_clock(self, substep: int = 0) -> None:
-        """Tell the moving colliders the time of the next call's first substep."""
+        """Tell the moving colliders and meshes the time of the next call's first substep."""
+        # the clock counts the substeps run so far, so ``substep`` is already in self.time
         if self._motion is not None:
-            # the clock counts the substeps run so far, so ``substep`` is already in self.time
             self._motion.clock[0] = self.time
             self._motion.clock[1] = self.dt
+        if self._meshes is not None:
+            self._meshes.clock[0] = self.time
+            self._meshes.clock[1] = self.dt
+            self._meshes.clock[2] = 0.0
 
     # ------------------------------------------------------------------------------------------
     # Stepping
@@ -338,10 +360,13 @@ class Simulation:
         gave the frame up half-way (the state must be restored)."""
         self._start_clock(substep)
         if not self._member_at:
-            self._member_at, repel = kernel_addresses(*self._kernel_args, self._sync)
-            st, spec, *rest = self._kernel_args
+            self._member_at, repel, collide = kernel_addresses(*self._kernel_args, self._sync)
+            st, spec, grid, col, mov, mesh, *rest = self._kernel_args
             if spec is not None:
-                self._kernel_args = (st, spec._replace(repel=repel), *rest)
+                spec = spec._replace(repel=repel)
+            if mesh is not None:
+                mesh = mesh._replace(collide=collide)
+            self._kernel_args = (st, spec, grid, col, mov, mesh, *rest)
         self.colliders_skipped += run_substeps(steps, *self._kernel_args, self._sync, size, passes, self._member_at)
         if passes & PASS_INTEGRATE:
             self._clock[1] += steps

@@ -263,6 +263,7 @@ def scene_json(scene: Scene) -> dict[str, Any]:
         **({"capsule": [collider_json(c) for c in scene.capsules]} if scene.capsules else {}),
         **({"box": [collider_json(b) for b in scene.boxes]} if scene.boxes else {}),
         **({"wind": [w.as_json() for w in scene.winds]} if scene.winds else {}),
+        **({"mesh": [m.as_json() for m in scene.meshes]} if scene.meshes else {}),
         "simulation": dataclasses.asdict(scene.simulation),
         **({"render": scene.render} if scene.render is not None else {}),
     }

@@ -135,7 +135,7 @@ def _simulate(task: Task, result: dict[str, Any]) -> None:
             break
         sim.step(1)
         frame += 1
-        if rest is not None and rest_image is None and rest.update(sim._pos):
+        if rest is not None and rest_image is None and rest.update(sim._pos) and sim.time >= sim.colliders_still_after:
             rest_image = image() if any(c >= frame for c in cells) else np.zeros(0)
     for c in cells:  # frames after the cloth came to rest: its resting image
         if c not in images:

@@ -1,0 +1,190 @@
+"""The scene's ``mesh`` collider: its rule, the OBJ it names, and the checks on that mesh's shape.
+
+``"mesh": {"path": "shape.obj", "scale": 1.0, "translate": [0, 0, 0], "rotation": [0, 0, 0],
+"friction": 0.3, "motion": {...}}`` (one object or a list). The path is relative to the scene
+file. A vertex ``v`` of the file is placed at ``R (scale v) + translate`` with ``R = Rz Ry Rx``
+(degrees, right-handed, x applied first); ``motion`` moves ``translate`` over time
+(:mod:`clothsim.motion`; the velocity form starts from ``translate``).
+
+What is checked on the triangles, after the OBJ reader's own checks (:mod:`clothsim.objfile`):
+
+* no triangle of zero area (collinear corners);
+* edge-manifold: every edge (pair of vertex indices) belongs to one or two triangles; one in
+  three or more is refused;
+* consistently wound: two triangles sharing an edge run along it in opposite directions (else
+  "inside" is undefined);
+* the mesh is **closed** when every edge has two triangles, **open** when some have one. A closed
+  mesh wound inside out (negative signed volume) is turned the right way out.
+
+Not checked: vertex-manifoldness (two surfaces touching at one vertex), self-intersection, and
+several separate closed parts (each keeps points out of itself, which is what a user expects).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from . import validate as V
+from .motion import MOTION, MotionSpec, Track
+from .objfile import ObjError, read_obj
+
+#: Largest scale and translation accepted: far beyond any scene, so that positions stay finite.
+MAX_EXTENT = 1e6
+_FRICTION = V.number(ge=0.0, le=1.0)
+
+
+@dataclass(frozen=True, eq=False)
+class MeshSpec:
+    """A triangle-mesh collider: the file and placement as written, and the checked triangles.
+
+    ``vertices`` (V, 3) float64 as in the file; ``triangles`` (T, 3) int64, wound so that their
+    normals (right-hand rule) face out of a closed mesh; ``closed`` tells which kind it is.
+    """
+
+    path: str
+    file: str
+    scale: float
+    translate: tuple[float, float, float]
+    rotation: tuple[float, float, float]
+    friction: float
+    motion: MotionSpec | None
+    vertices: np.ndarray
+    triangles: np.ndarray
+    closed: bool
+
+    def rotation_matrix(self) -> np.ndarray:
+        """R = Rz . Ry . Rx for the ``rotation`` angles (degrees)."""
+        return rotation_matrix(self.rotation)
+
+    def local_vertices(self) -> np.ndarray:
+        """Vertices scaled and rotated, before the translation: (V, 3) float64."""
+        return (self.vertices * self.scale) @ self.rotation_matrix().T
+
+    def track(self) -> Track:
+        """The translation over time (a held keyframe at ``translate`` when the mesh does not move)."""
+        if self.motion is None:
+            return MotionSpec(keyframes=((0.0, self.translate),)).track()
+        return self.motion.track(start=self.translate)
+
+    def as_json(self) -> dict[str, Any]:
+        """The object as a scene file writes it (the path resolved, so it loads from anywhere)."""
+        out: dict[str, Any] = {"path": os.path.abspath(self.file), "scale": self.scale,
+                               "translate": list(self.translate), "rotation": list(self.rotation),
+                               "friction": self.friction}
+        if self.motion is not None:
+            out["motion"] = ({"velocity": list(self.motion.velocity)} if self.motion.velocity is not None else
+                             {"keyframes": [[t, list(p)] for t, p in self.motion.keyframes]})
+        return out
+
+
+def rotation_matrix(degrees: tuple[float, float, float]) -> np.ndarray:
+    """R = Rz . Ry . Rx (right-handed, angles in degrees, x applied first)."""
+    ax, ay, az = (math.radians(a) for a in degrees)
+    cx, sx, cy, sy, cz, sz = math.cos(ax), math.sin(ax), math.cos(ay), math.sin(ay), math.cos(az), math.sin(az)
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def check_topology(vertices: np.ndarray, triangles: np.ndarray, lines: np.ndarray) -> tuple[np.ndarray, bool]:
+    """The triangles (outward-wound when closed) and whether the mesh is closed; raises
+    :class:`~clothsim.objfile.ObjError` naming the face's line for a degenerate triangle, an edge
+    in more than two triangles, or two neighbours wound against each other."""
+    a, b, c = (vertices[triangles[:, k]] for k in range(3))
+    area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)
+    bad = np.flatnonzero(~(area2 > 0.0))
+    if bad.size:
+        raise ObjError(int(lines[bad[0]]), "face has zero area (its corners are collinear)")
+    heads = triangles.reshape(-1)
+    tails = triangles[:, [1, 2, 0]].reshape(-1)
+    lo = np.minimum(heads, tails)
+    hi = np.maximum(heads, tails)
+    key = lo * (int(vertices.shape[0]) + 1) + hi
+    order = np.argsort(key, kind="stable")
+    sk = key[order]
+    starts = np.flatnonzero(np.r_[True, sk[1:] != sk[:-1]])
+    counts = np.diff(np.r_[starts, sk.size])
+    face_line = np.repeat(lines, 3)[order]
+    over = np.flatnonzero(counts > 2)
+    if over.size:
+        s = starts[over[0]]
+        n = int(counts[over[0]])
+        e = order[s]
+        shown = ", ".join(str(int(x)) for x in face_line[s : s + min(n, 4)])
+        raise ObjError(int(face_line[s]), f"non-manifold: the edge between vertices {int(lo[e]) + 1} and "
+                                          f"{int(hi[e]) + 1} is shared by {n} faces (lines {shown}); "
+                                          f"an edge may belong to at most 2")
+    pairs = starts[counts == 2]
+    same = heads[order[pairs]] == heads[order[pairs + 1]]
+    if same.any():
+        s = pairs[np.flatnonzero(same)[0]]
+        e = order[s]
+        raise ObjError(int(face_line[s + 1]), f"faces on lines {int(face_line[s])} and {int(face_line[s + 1])} "
+                                              f"are wound the same way along their shared edge (vertices "
+                                              f"{int(lo[e]) + 1} and {int(hi[e]) + 1}); a collider needs "
+                                              f"consistently oriented faces")
+    closed = bool((counts == 2).all())
+    out = triangles
+    if closed:
+        volume = float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum())
+        if volume < 0.0:
+            out = triangles[:, [0, 2, 1]]
+    return np.ascontiguousarray(out, dtype=np.int64), closed
+
+
+# ----------------------------------------------------------------------------------------------
+# The scene rule
+
+
+def _path(value: Any, at: V.At) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise at.fail(f"expected the path of an OBJ file, got {V.shown(value)}")
+    return value
+
+
+_FIELDS = V.record({
+    "path": V.required(_path),
+    "scale": V.default(V.number(gt=0.0, le=MAX_EXTENT), 1.0),
+    "translate": V.default(V.vec3(V.number(ge=-MAX_EXTENT, le=MAX_EXTENT)), (0.0, 0.0, 0.0)),
+    "rotation": V.default(V.vec3(), (0.0, 0.0, 0.0)),
+    "friction": V.required(_FRICTION),
+    "motion": V.default(MOTION, None),
+})
+
+
+def _base_dir(source: str | None) -> Path:
+    if source is None or source.startswith("<"):
+        return Path(".")
+    return Path(source).parent
+
+
+def MESH(value: Any, at: V.At) -> MeshSpec:  # noqa: N802 - a rule, named like the scene's records
+    """The rule for one ``mesh`` object: its fields, then the OBJ file read and checked."""
+    fields = _FIELDS(value, at)
+    here = at.key("path")
+    path = fields["path"]
+    file = _base_dir(at.source) / path
+    try:
+        obj = read_obj(str(file))
+        triangles, closed = check_topology(obj.vertices, obj.triangles, obj.lines)
+    except FileNotFoundError:
+        raise here.fail(f"{path}: no such OBJ file (looked for {file})") from None
+    except IsADirectoryError:
+        raise here.fail(f"{path}: is a directory, not an OBJ file") from None
+    except OSError as exc:
+        raise here.fail(f"{path}: cannot read OBJ file: {exc.strerror or exc}") from None
+    except ObjError as exc:
+        raise here.fail(f"{path}: {exc}") from None
+    spec = MeshSpec(path=path, file=str(file), scale=fields["scale"], translate=fields["translate"],
+                    rotation=fields["rotation"], friction=fields["friction"], motion=fields["motion"],
+                    vertices=obj.vertices, triangles=triangles, closed=closed)
+    if not np.isfinite(spec.local_vertices() * 2.0).all():
+        raise at.key("scale").fail(f"places the mesh's vertices beyond the float range (scale {spec.scale:g})")
+    return spec

@@ -1,0 +1,370 @@
+"""Collisions with triangle meshes (:class:`~clothsim.sim.meshgrid.MeshGroup`), one point at a time.
+
+Each substep a mesh has a translation before and after it (its motion track at the substep's two
+ends); a point is handled in the mesh's own frame, where its last position ``l`` and its position
+``q`` are taken relative to those two translations. Every candidate triangle (from the grid cells
+overlapping ``q +- r``, ``r`` = thickness + |q - l|) gives
+
+* the closest point on it to ``q`` (Ericson, Real-Time Collision Detection, 5.1.5), with the
+  feature it lies on (face, edge or vertex) for the pseudo-normal;
+* whether the segment ``l -> q`` crosses it (Moller-Trumbore), which sweeps the substep's
+  relative motion, so a fast point or a fast mesh cannot pass through a face unseen.
+
+The point is then corrected, in this order:
+
+1. it crossed a face from the side of that face's normal, for a closed mesh, or from either side,
+   for an open one: it goes back onto the plane of the face it crossed first, lifted by the
+   thickness on the side it came from (like a plane);
+2. a closed mesh only: it lies inside (by the pseudo-normal at its closest point, at most ``r``
+   away): it goes to the closest point, lifted out by the thickness along the pseudo-normal;
+3. it is nearer than the thickness: it is pushed straight away from the closest point to the
+   thickness (along the face's normal, on its last position's side, if it lies on the surface).
+
+Friction as for spheres: the point moves from its last position towards the corrected one by
+(1 - friction), relative to the mesh, so a mesh of friction 1 carries the points it holds.
+Ties between triangles are broken by the lower triangle index, so the grid's answer does not
+depend on the order it visits cells, and equals the brute-force one (:func:`mesh_targets`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..motion import position_at
+from .jit import CHUNKS, EXACT
+from .meshgrid import DIMS_CELL0, DIMS_CLOSED, DIMS_K0, DIMS_K1, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
+    INFO_HI, INFO_INV_H, INFO_LO
+from .team import share
+
+_position_at = njit(**EXACT)(position_at)
+
+# closest-point features
+FACE, VERTEX_A, VERTEX_B, VERTEX_C, EDGE_AB, EDGE_BC, EDGE_CA = 0, 1, 2, 3, 4, 5, 6
+
+
+@njit(**EXACT)
+def closest_on_triangle(px: float, py: float, pz: float, ax: float, ay: float, az: float, bx: float, by: float,
+                        bz: float, cx: float, cy: float, cz: float) -> tuple[float, float, float, int]:
+    """The point of triangle abc closest to p and the feature it lies on (Ericson 5.1.5)."""
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return ax, ay, az, VERTEX_A
+    bpx, bpy, bpz = px - bx, py - by, pz - bz
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
+    if d3 >= 0.0 and d4 <= d3:
+        return bx, by, bz, VERTEX_B
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return ax + v * abx, ay + v * aby, az + v * abz, EDGE_AB
+    cpx, cpy, cpz = px - cx, py - cy, pz - cz
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
+    if d6 >= 0.0 and d5 <= d6:
+        return cx, cy, cz, VERTEX_C
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return ax + w * acx, ay + w * acy, az + w * acz, EDGE_CA
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return bx + w * (cx - bx), by + w * (cy - by), bz + w * (cz - bz), EDGE_BC
+    denom = 1.0 / (va + vb + vc)
+    v = vb * denom
+    w = vc * denom
+    return ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w, FACE
+
+
+@njit(**EXACT)
+def segment_hits(lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, ax: float, ay: float,
+                 az: float, bx: float, by: float, bz: float, cx: float, cy: float, cz: float) -> float:
+    """Parameter s in [0, 1] where the segment l -> q meets triangle abc (Moller-Trumbore), or -1."""
+    dx, dy, dz = qx - lx, qy - ly, qz - lz
+    e1x, e1y, e1z = bx - ax, by - ay, bz - az
+    e2x, e2y, e2z = cx - ax, cy - ay, cz - az
+    hx = dy * e2z - dz * e2y
+    hy = dz * e2x - dx * e2z
+    hz = dx * e2y - dy * e2x
+    det = e1x * hx + e1y * hy + e1z * hz
+    if det == 0.0:
+        return -1.0
+    inv = 1.0 / det
+    sx, sy, sz = lx - ax, ly - ay, lz - az
+    u = (sx * hx + sy * hy + sz * hz) * inv
+    if u < 0.0 or u > 1.0:
+        return -1.0
+    kx = sy * e1z - sz * e1y
+    ky = sz * e1x - sx * e1z
+    kz = sx * e1y - sy * e1x
+    v = (dx * kx + dy * ky + dz * kz) * inv
+    if v < 0.0 or u + v > 1.0:
+        return -1.0
+    s = (e2x * kx + e2y * ky + e2z * kz) * inv
+    if s < 0.0 or s > 1.0:
+        return -1.0
+    return s
+
+
+@njit(inline="always", **EXACT)
+def pseudo_normal(mesh: tuple, t: int, feature: int) -> tuple[float, float, float]:
+    """The pseudo-normal of triangle ``t``'s ``feature`` (face, edge or vertex)."""
+    if feature == FACE:
+        return mesh.fnorm[t, 0], mesh.fnorm[t, 1], mesh.fnorm[t, 2]
+    if feature >= EDGE_AB:
+        k = feature - EDGE_AB
+        return mesh.enorm[t, k, 0], mesh.enorm[t, k, 1], mesh.enorm[t, k, 2]
+    v = mesh.tris[t, feature - VERTEX_A]
+    return mesh.vnorm[v, 0], mesh.vnorm[v, 1], mesh.vnorm[v, 2]
+
+
+@njit(inline="always", **EXACT)
+def resolve(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, d2: float,
+            cx: float, cy: float, cz: float, t: int, feature: int, h: int) -> tuple[bool, float, float, float]:
+    """(contact?, corrected position in the mesh frame before friction) from the closest point c
+    (distance^2 ``d2``, triangle ``t``, ``feature``; t = -1: none within reach) and the first
+    crossed triangle ``h`` (-1: none)."""
+    th = mesh.thickness
+    closed = mesh.dims[m, DIMS_CLOSED] != 0
+    if h >= 0:
+        nx, ny, nz = mesh.fnorm[h, 0], mesh.fnorm[h, 1], mesh.fnorm[h, 2]
+        v = mesh.tris[h, 0]
+        x0, y0, z0 = mesh.verts[v, 0], mesh.verts[v, 1], mesh.verts[v, 2]
+        before = (lx - x0) * nx + (ly - y0) * ny + (lz - z0) * nz
+        side = 1.0 if before >= 0.0 else -1.0
+        if not closed or side > 0.0:
+            shift = side * th - ((qx - x0) * nx + (qy - y0) * ny + (qz - z0) * nz)
+            return True, qx + nx * shift, qy + ny * shift, qz + nz * shift
+    if t < 0:
+        return False, qx, qy, qz
+    dx, dy, dz = qx - cx, qy - cy, qz - cz
+    if closed:
+        nx, ny, nz = pseudo_normal(mesh, t, feature)
+        if dx * nx + dy * ny + dz * nz < 0.0:
+            return True, cx + nx * th, cy + ny * th, cz + nz * th
+    if d2 >= th * th:
+        return False, qx, qy, qz
+    if d2 > 0.0:
+        s = th / math.sqrt(d2)
+        return True, cx + dx * s, cy + dy * s, cz + dz * s
+    nx, ny, nz = mesh.fnorm[t, 0], mesh.fnorm[t, 1], mesh.fnorm[t, 2]
+    side = th if (lx - cx) * nx + (ly - cy) * ny + (lz - cz) * nz >= 0.0 else -th
+    return True, cx + nx * side, cy + ny * side, cz + nz * side
+
+
+@njit(**EXACT)
+def tri_test(verts: np.ndarray, tris: np.ndarray, fnorm: np.ndarray, t: int, lx: float, ly: float, lz: float,
+             qx: float, qy: float, qz: float, r: float) -> tuple[float, float, float, float, int, float]:
+    """Triangle ``t`` against a point: (distance^2 from q, closest point, its feature, the
+    parameter where l -> q crosses the triangle or -1); distance^2 is inf for a triangle whose
+    plane is further than ``r`` from q (then nothing within r, and no crossing, since |q - l| < r)."""
+    a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
+    ax, ay, az = verts[a, 0], verts[a, 1], verts[a, 2]
+    nx, ny, nz = fnorm[t, 0], fnorm[t, 1], fnorm[t, 2]
+    dq = (qx - ax) * nx + (qy - ay) * ny + (qz - az) * nz
+    if dq > r or dq < -r:
+        return np.inf, 0.0, 0.0, 0.0, -1, -1.0
+    bx, by, bz = verts[b, 0], verts[b, 1], verts[b, 2]
+    cx, cy, cz = verts[c, 0], verts[c, 1], verts[c, 2]
+    px, py, pz, feature = closest_on_triangle(qx, qy, qz, ax, ay, az, bx, by, bz, cx, cy, cz)
+    d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
+    dl = (lx - ax) * nx + (ly - ay) * ny + (lz - az) * nz
+    if (dq > 0.0 and dl > 0.0) or (dq < 0.0 and dl < 0.0):
+        return d2, px, py, pz, feature, -1.0  # both ends strictly on one side: no crossing
+    return d2, px, py, pz, feature, segment_hits(lx, ly, lz, qx, qy, qz, ax, ay, az, bx, by, bz, cx, cy, cz)
+
+
+@njit(**EXACT)
+def _far(tbox: np.ndarray, t: int, qx: float, qy: float, qz: float, r: float) -> bool:
+    # A triangle whose bounding box is further than r from q in some axis can neither be within r
+    # (too far) nor be crossed (the segment lies within |q - l| < r of q): passed over untested.
+    return (qx + r < tbox[t, 0] or qx - r > tbox[t, 3] or qy + r < tbox[t, 1] or qy - r > tbox[t, 4]
+            or qz + r < tbox[t, 2] or qz - r > tbox[t, 5])
+
+
+@njit(**EXACT)
+def _fold(t: int, d2: float, px: float, py: float, pz: float, feature: int, s: float, r2: float, bd2: float,
+          bpx: float, bpy: float, bpz: float, bt: int, bf: int, bs: float, bh: int
+          ) -> tuple[float, float, float, float, int, int, float, int]:
+    """The running answer after triangle ``t``: closest within sqrt(r2) (distance^2, point,
+    triangle, feature) and first crossing (parameter, triangle); -1 = none. Ties go to the lower
+    triangle index, so the order triangles come in does not matter."""
+    if d2 <= r2 and (bt < 0 or d2 < bd2 or (d2 == bd2 and t < bt)):
+        bd2, bpx, bpy, bpz, bt, bf = d2, px, py, pz, t, feature
+    if s >= 0.0 and (bh < 0 or s < bs or (s == bs and t < bh)):
+        bs, bh = s, t
+    return bd2, bpx, bpy, bpz, bt, bf, bs, bh
+
+
+@njit(**EXACT)
+def _cell(x: float, lo: float, inv_h: float, n: int) -> int:
+    c = int(math.floor((x - lo) * inv_h))
+    return 0 if c < 0 else (n - 1 if c > n - 1 else c)
+
+
+@njit(inline="always", **EXACT)
+def point_contact(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float,
+                  brute: bool) -> tuple[bool, float, float, float]:
+    """Collide one point (mesh frame: last ``l``, now ``q``) with mesh ``m``: (contact?, the
+    corrected position before friction). ``brute`` tests every triangle instead of the grid's
+    (same answer)."""
+    info = mesh.info
+    dims = mesh.dims
+    r = mesh.thickness + math.sqrt((qx - lx) ** 2 + (qy - ly) ** 2 + (qz - lz) ** 2)
+    if (qx + r < info[m, INFO_LO] or qx - r > info[m, INFO_HI] or qy + r < info[m, INFO_LO + 1]
+            or qy - r > info[m, INFO_HI + 1] or qz + r < info[m, INFO_LO + 2] or qz - r > info[m, INFO_HI + 2]):
+        return False, qx, qy, qz
+    verts = mesh.verts
+    tris = mesh.tris
+    tbox = mesh.tbox
+    fnorm = mesh.fnorm
+    r2 = r * r
+    bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
+    if brute:
+        for t in range(dims[m, DIMS_TRI0], dims[m, DIMS_TRI1]):
+            if not _far(tbox, t, qx, qy, qz, r):
+                d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
+                bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy, bpz, bt,
+                                                           bf, bs, bh)
+    else:
+        inv_h = info[m, INFO_INV_H]
+        nx, ny, nz = dims[m, DIMS_N], dims[m, DIMS_N + 1], dims[m, DIMS_N + 2]
+        x0 = _cell(qx - r, info[m, INFO_LO], inv_h, nx)
+        x1 = _cell(qx + r, info[m, INFO_LO], inv_h, nx)
+        y0 = _cell(qy - r, info[m, INFO_LO + 1], inv_h, ny)
+        y1 = _cell(qy + r, info[m, INFO_LO + 1], inv_h, ny)
+        z0 = _cell(qz - r, info[m, INFO_LO + 2], inv_h, nz)
+        z1 = _cell(qz + r, info[m, INFO_LO + 2], inv_h, nz)
+        base = dims[m, DIMS_CELL0]
+        cell_start = mesh.cell_start
+        cell_tris = mesh.cell_tris
+        for cz in range(z0, z1 + 1):
+            for cy in range(y0, y1 + 1):
+                for cx in range(x0, x1 + 1):
+                    cell = base + (cz * ny + cy) * nx + cx
+                    for e in range(cell_start[cell], cell_start[cell + 1]):
+                        t = cell_tris[e]
+                        if not _far(tbox, t, qx, qy, qz, r):
+                            d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
+                            bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy,
+                                                                       bpz, bt, bf, bs, bh)
+    return resolve(mesh, m, lx, ly, lz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
+
+
+@njit(**EXACT)
+def mesh_shift(mesh: tuple, m: int, t: float, out: np.ndarray) -> None:
+    """Mesh ``m``'s translation at time ``t`` into ``out`` (3,)."""
+    k0, k1 = mesh.dims[m, DIMS_K0], mesh.dims[m, DIMS_K1]
+    _position_at(mesh.times[k0:k1], mesh.points[k0:k1], mesh.velocity[m], t, out)
+
+
+@njit(**EXACT)
+def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple, m: int,
+                        before: np.ndarray, after: np.ndarray, brute: bool) -> None:
+    """Collide the points ``free`` with mesh ``m`` translated by ``before`` at the substep's start
+    and ``after`` at its end, in place."""
+    keep = 1.0 - mesh.info[m, INFO_FRICTION]
+    bx, by, bz = before[0], before[1], before[2]
+    ax, ay, az = after[0], after[1], after[2]
+    for k in range(free.shape[0]):
+        p = free[k]
+        lx, ly, lz = last[0, p] - bx, last[1, p] - by, last[2, p] - bz
+        hit, ox, oy, oz = point_contact(mesh, m, lx, ly, lz, pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az, brute)
+        if hit:
+            pos[0, p] = ax + lx + (ox - lx) * keep
+            pos[1, p] = ay + ly + (oy - ly) * keep
+            pos[2, p] = az + lz + (oz - lz) * keep
+
+
+@njit(**EXACT)
+def mesh_flags(mesh: tuple | None) -> np.ndarray:
+    """Work space: one reachability flag per mesh (none without meshes)."""
+    if mesh is None:
+        return np.zeros(0, dtype=np.bool_)
+    return np.zeros(mesh.dims.shape[0], dtype=np.bool_)
+
+
+@njit(**EXACT)
+def reachable_meshes(mesh: tuple | None, box: np.ndarray, step: int, on: np.ndarray) -> int:
+    """Mark the meshes the cloth's bounding box (current and last positions) may touch during
+    substep ``step`` of this call; returns how many were ruled out. A mesh's box, over both
+    translations of the substep and widened by the thickness, that misses the cloth's box can
+    neither be crossed nor come within the thickness of a point, so skipping it is exact."""
+    if mesh is None:
+        return 0
+    skipped = 0
+    t1 = mesh.clock[0] + (step + 1) * mesh.clock[1]
+    before = np.empty(3)
+    after = np.empty(3)
+    for m in range(mesh.dims.shape[0]):
+        mesh_shift(mesh, m, t1 - mesh.clock[1], before)
+        mesh_shift(mesh, m, t1, after)
+        hit = True
+        for c in range(3):
+            lo = mesh.info[m, INFO_LO + c] + min(before[c], after[c]) - mesh.thickness
+            hi = mesh.info[m, INFO_HI + c] + max(before[c], after[c]) + mesh.thickness
+            if hi < box[c] or lo > box[3 + c]:
+                hit = False
+        on[m] = hit
+        skipped += 0 if hit else 1
+    return skipped
+
+
+@njit(**EXACT)
+def collide_meshes_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple | None, on: np.ndarray,
+                         step: int, c: int) -> None:
+    """Work item ``c`` (of CHUNKS) of the mesh pass in substep ``step`` of this call: the c-th part
+    of the free points against every reachable mesh, in scene order."""
+    if mesh is None:
+        return
+    n = free.shape[0]
+    f0, f1 = share(n, c, CHUNKS)
+    part = free[f0:f1]
+    t1 = mesh.clock[0] + (step + 1) * mesh.clock[1]
+    before = np.empty(3)
+    after = np.empty(3)
+    for m in range(mesh.dims.shape[0]):
+        if on[m]:
+            mesh_shift(mesh, m, t1 - mesh.clock[1], before)
+            mesh_shift(mesh, m, t1, after)
+            collide_mesh_points(pos, last, part, mesh, m, before, after, False)
+
+
+@njit(**EXACT)
+def mesh_targets(pos: np.ndarray, last: np.ndarray, mesh: tuple, brute: bool) -> np.ndarray:
+    """Every point of (3, N) ``pos`` collided with every mesh (static, at time 0), on a copy: the
+    grid's answer, or the brute-force one (for tests)."""
+    out = pos.copy()
+    free = np.arange(pos.shape[1])
+    shift = np.empty(3)
+    for m in range(mesh.dims.shape[0]):
+        mesh_shift(mesh, m, 0.0, shift)
+        collide_mesh_points(out, last, free, mesh, m, shift, shift, brute)
+    return out
+
+
+@njit(**EXACT)
+def mesh_corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple | None) -> int:
+    """The mesh pass of the integrators other than the spec's Verlet, one substep per call
+    (``mesh.clock[2]`` counts the substeps of the current call); returns the meshes skipped."""
+    if mesh is None:
+        return 0
+    step = int(mesh.clock[2])
+    mesh.clock[2] += 1.0
+    box = np.empty(6)
+    for c in range(3):
+        box[c] = min(pos[c].min(), last[c].min())
+        box[3 + c] = max(pos[c].max(), last[c].max())
+    on = mesh_flags(mesh)
+    skipped = reachable_meshes(mesh, box, step, on)
+    for c in range(CHUNKS):
+        collide_meshes_chunk(pos, last, free, mesh, on, step, c)
+    return skipped

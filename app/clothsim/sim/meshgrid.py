@@ -1,0 +1,179 @@
+"""Triangle-mesh colliders packed for the kernels, with the uniform grid built once over their triangles.
+
+Every mesh of a scene goes into one :class:`MeshGroup` of flat arrays: its scaled and rotated
+vertices (the translation, which may move, is applied to the cloth's points instead), triangles,
+the pseudo-normals that tell inside from outside (face normals, edge normals = the normalised sum
+of the two faces' normals, and angle-weighted vertex normals: Baerentzen and Aanaes, "Signed
+distance computation using the angle weighted pseudonormal", IEEE TVCG 2005), its translation
+track (:mod:`clothsim.motion`), and a uniform grid of its triangles.
+
+The grid: cubic cells of edge ``h`` over the mesh's bounding box, ``h`` the mean of the
+triangles' largest bounding-box sides (grown until there are at most 8 cells per triangle, so a
+flat or long mesh cannot make the grid huge); a triangle is listed in every cell its bounding box
+overlaps. A point's query visits the cells its query box overlaps. Cell indices are
+``floor((x - lo) * inv_h)`` clipped to the grid, the same expression here and in the kernel.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ..scene import Scene
+
+#: Columns of ``MeshGroup.info`` (float64) and ``MeshGroup.dims`` (int64), one row per mesh.
+INFO_LO, INFO_HI, INFO_INV_H, INFO_FRICTION = 0, 3, 6, 7
+DIMS_TRI0, DIMS_TRI1, DIMS_CELL0, DIMS_N, DIMS_CLOSED, DIMS_K0, DIMS_K1 = 0, 1, 2, 3, 6, 7, 8
+#: Most cells per triangle the grid may have (see the module's docstring).
+MAX_CELLS_PER_TRIANGLE = 8
+
+
+class MeshGroup(NamedTuple):
+    """Every mesh collider of a scene as flat arrays (see the module's docstring)."""
+
+    verts: np.ndarray  # (V, 3) scaled and rotated, before the translation
+    tris: np.ndarray  # (T, 3) int64, outward-wound for a closed mesh
+    tbox: np.ndarray  # (T, 6) each triangle's bounding box: lo xyz, hi xyz
+    fnorm: np.ndarray  # (T, 3) unit face normals
+    enorm: np.ndarray  # (T, 3, 3) unit edge pseudo-normals, edge k = corner k -> corner k+1
+    vnorm: np.ndarray  # (V, 3) unit angle-weighted vertex pseudo-normals
+    info: np.ndarray  # (M, 8) bounding box lo, hi (local), 1/cell edge, friction
+    dims: np.ndarray  # (M, 9) first and end triangle, first cell, cells along x y z, closed, track range
+    cell_start: np.ndarray  # (C + 1,) int64
+    cell_tris: np.ndarray  # (E,) int64 triangle ids, cell by cell
+    times: np.ndarray  # (K,) every mesh's keyframe times, mesh after mesh
+    points: np.ndarray  # (K, 3) translations at those times
+    velocity: np.ndarray  # (M, 3) translation velocity after the last keyframe
+    clock: np.ndarray  # (3,) time at the start of the kernel call, substep length, substeps done (other integrators)
+    thickness: float
+    #: address of the mesh pass compiled for this group (see :func:`clothsim.sim.frame.kernel_addresses`); 0 until known
+    collide: int = 0
+
+
+def _unit_rows(v: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.where(n > 0.0, v / np.where(n > 0.0, n, 1.0), 0.0)
+
+
+def pseudo_normals(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Face normals (T, 3), edge pseudo-normals (T, 3, 3) and vertex pseudo-normals (V, 3).
+
+    A boundary edge (one face) gets that face's normal."""
+    a, b, c = (verts[tris[:, k]] for k in range(3))
+    fn = _unit_rows(np.cross(b - a, c - a))
+    t = tris.shape[0]
+    heads = tris.reshape(-1)
+    tails = tris[:, [1, 2, 0]].reshape(-1)
+    key = np.minimum(heads, tails) * (verts.shape[0] + 1) + np.maximum(heads, tails)
+    _, inverse = np.unique(key, return_inverse=True)
+    summed = np.zeros((inverse.max() + 1, 3))
+    np.add.at(summed, inverse, np.repeat(fn, 3, axis=0))
+    en = _unit_rows(summed[inverse]).reshape(t, 3, 3)
+    vn = np.zeros_like(verts)
+    corners = (a, b, c)
+    for k in range(3):
+        p, q, r = corners[k], corners[(k + 1) % 3], corners[(k + 2) % 3]
+        u = _unit_rows(q - p)
+        w = _unit_rows(r - p)
+        angle = np.arccos(np.clip(np.einsum("ij,ij->i", u, w), -1.0, 1.0))
+        np.add.at(vn, tris[:, k], fn * angle[:, None])
+    return fn, en, _unit_rows(vn)
+
+
+def build_grid(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, tuple[int, int, int],
+                                                           np.ndarray, np.ndarray]:
+    """The uniform grid of one mesh: (lo, hi, inv_h, cells along x y z, cell_start, cell_tris);
+    triangle ids in ``cell_tris`` are local to ``tris``."""
+    lo = verts.min(axis=0)
+    hi = verts.max(axis=0)
+    tlo = np.minimum(np.minimum(verts[tris[:, 0]], verts[tris[:, 1]]), verts[tris[:, 2]])
+    thi = np.maximum(np.maximum(verts[tris[:, 0]], verts[tris[:, 1]]), verts[tris[:, 2]])
+    extent = np.maximum(hi - lo, 0.0)
+    h = float(np.mean((thi - tlo).max(axis=1)))
+    if not h > 0.0:
+        h = max(float(extent.max()), 1e-9)
+    limit = MAX_CELLS_PER_TRIANGLE * tris.shape[0] + 64
+    while True:
+        n = np.maximum(np.ceil(extent / h).astype(np.int64), 1)
+        if int(np.prod(n)) <= limit:
+            break
+        h *= 1.25
+    inv_h = 1.0 / h
+
+    def cell(x: np.ndarray) -> np.ndarray:
+        return np.clip(np.floor((x - lo) * inv_h).astype(np.int64), 0, n - 1)
+
+    c0 = cell(tlo)
+    c1 = cell(thi)
+    span = c1 - c0 + 1
+    count = np.prod(span, axis=1)
+    ids = np.repeat(np.arange(tris.shape[0], dtype=np.int64), count)
+    # the k-th cell of a triangle's block, k = 0..count-1, as offsets along x, y, z
+    k = np.arange(ids.size, dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
+    sx = span[ids, 0]
+    sy = span[ids, 1]
+    ox = k % sx
+    oy = (k // sx) % sy
+    oz = k // (sx * sy)
+    flat = ((c0[ids, 2] + oz) * n[1] + (c0[ids, 1] + oy)) * n[0] + (c0[ids, 0] + ox)
+    order = np.argsort(flat, kind="stable")
+    cell_tris = ids[order]
+    start = np.zeros(int(np.prod(n)) + 1, dtype=np.int64)
+    np.add.at(start, flat + 1, 1)
+    return lo, hi, inv_h, (int(n[0]), int(n[1]), int(n[2])), np.cumsum(start), cell_tris
+
+
+def mesh_group(scene: Scene) -> MeshGroup | None:
+    """The scene's meshes packed for the kernels, or None when it has none."""
+    if not scene.meshes:
+        return None
+    verts, tris, fnorm, enorm, vnorm, starts, cells, times, points, vel = ([] for _ in range(10))
+    info = np.zeros((len(scene.meshes), 8))
+    dims = np.zeros((len(scene.meshes), 9), dtype=np.int64)
+    nv = nt = nc = nk = 0
+    for m, spec in enumerate(scene.meshes):
+        v = spec.local_vertices()
+        t = spec.triangles
+        fn, en, vn = pseudo_normals(v, t)
+        lo, hi, inv_h, n, start, cell_tris = build_grid(v, t)
+        track = spec.track()
+        info[m, INFO_LO:INFO_LO + 3] = lo
+        info[m, INFO_HI:INFO_HI + 3] = hi
+        info[m, INFO_INV_H] = inv_h
+        info[m, INFO_FRICTION] = spec.friction
+        k = track.times.shape[0]
+        dims[m] = (nt, nt + t.shape[0], nc, *n, int(spec.closed), nk, nk + k)
+        verts.append(v)
+        tris.append(t + nv)
+        fnorm.append(fn)
+        enorm.append(en)
+        vnorm.append(vn)
+        starts.append(start[:-1] + sum(c.size for c in cells))
+        cells.append(cell_tris + nt)
+        times.append(track.times)
+        points.append(track.points)
+        vel.append(track.velocity)
+        nv += v.shape[0]
+        nt += t.shape[0]
+        nc += start.size - 1
+        nk += k
+    cell_start = np.concatenate([*starts, [sum(c.size for c in cells)]]).astype(np.int64)
+    thickness = scene.cloth.thickness
+    dt = 1.0 / (scene.simulation.frames_per_sec * scene.simulation.simulation_steps)
+    all_verts = np.ascontiguousarray(np.concatenate(verts))
+    all_tris = np.ascontiguousarray(np.concatenate(tris))
+    corners = all_verts[all_tris]  # (T, 3, 3)
+    tbox = np.ascontiguousarray(np.concatenate([corners.min(axis=1), corners.max(axis=1)], axis=1))
+    return MeshGroup(all_verts, all_tris, tbox,
+                     np.ascontiguousarray(np.concatenate(fnorm)), np.ascontiguousarray(np.concatenate(enorm)),
+                     np.ascontiguousarray(np.concatenate(vnorm)), info, dims, cell_start,
+                     np.ascontiguousarray(np.concatenate(cells)), np.ascontiguousarray(np.concatenate(times)),
+                     np.ascontiguousarray(np.concatenate(points)).reshape(-1, 3), np.array(vel).reshape(-1, 3),
+                     np.array([0.0, dt, 0.0]), float(thickness))
+
+
+def cells_per_mesh(group: MeshGroup) -> list[int]:
+    """Number of grid cells of each mesh (for reports)."""
+    return [int(math.prod(int(x) for x in row[DIMS_N:DIMS_N + 3])) for row in group.dims]

@@ -1,0 +1,264 @@
+"""Triangle-mesh colliders: the OBJ reader and its errors, the shape checks, the grid against brute
+force, and cloth kept outside closed meshes and on its side of open ones."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from clothsim import Simulation, load_scene
+from clothsim.errors import SceneError
+from clothsim.meshcollider import rotation_matrix
+from clothsim.objfile import ObjError, parse_obj
+from clothsim.shapes import TORUS, box_obj, torus_obj
+from clothsim.sim.meshcollide import mesh_targets
+from clothsim.sim.meshgrid import mesh_group
+
+from conftest import SCENES, error_line
+
+THICKNESS = 0.0095
+
+
+def _cloth(n: int = 14, y: float = 1.0, **extra) -> dict:
+    return {"width": 1.0, "height": 1.0, "num_width_points": n, "num_height_points": n, "thickness": THICKNESS,
+            "orientation": 0, "damping": 0.2, "density": 150.0, "ks": 5000.0, **extra}
+
+
+def _scene(tmp_path, obj_text: str, mesh: dict | list | None = None, **top) -> str:
+    (tmp_path / "shape.obj").write_text(obj_text)
+    data = {"cloth": _cloth(), "simulation": {"self_collision": False}, **top}
+    if mesh is not None:
+        data["mesh"] = mesh
+    path = tmp_path / "scene.json"
+    path.write_text(json.dumps(data))
+    return str(path)
+
+
+def _box_depth(points: np.ndarray, center, half, rotation=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """Signed distance of each point to an oriented box (negative inside)."""
+    q = (points - np.asarray(center)) @ rotation_matrix(rotation)  # into the box frame: R^T p
+    d = np.abs(q) - np.asarray(half)
+    outside = np.linalg.norm(np.maximum(d, 0.0), axis=1)
+    return outside + np.minimum(d.max(axis=1), 0.0)
+
+
+# -- reading OBJ ---------------------------------------------------------------------------------
+def test_reader_fans_polygons_and_reads_every_corner_form():
+    obj = parse_obj("# a quad and a triangle\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0 1.0\nvt 0 0\nvn 0 0 1\n"
+                    "o thing\ng part\ns off\nusemtl x\nf 1/1/1 2//1 3/1 4\nf -4 -2 -1\n")
+    assert obj.vertices.shape == (4, 3)
+    assert obj.triangles.tolist() == [[0, 1, 2], [0, 2, 3], [0, 2, 3]]
+    assert obj.lines.tolist() == [12, 12, 13]
+
+
+@pytest.mark.parametrize("text, line, words", [
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 4\n", 4, "face index 4 out of range"),
+    ("v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n", 2, "must be finite"),
+    ("v 0 0 0\nv 1 0 x\n", 2, "expected a number"),
+    ("v 0 0\n", 1, "needs 3 coordinates"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nl 1 2\n", 4, "unsupported statement 'l'"),
+    ("v 0 0 0\nv 1 0 0\nf 1 2\n", 3, "at least 3 corners"),
+    ("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 2\n", 4, "same vertex twice"),
+    ("v 0 0 0\nv 1 0 0\n", 0, "empty mesh: no faces"),
+])
+def test_reader_errors_name_the_line(text, line, words):
+    with pytest.raises(ObjError) as info:
+        parse_obj(text)
+    assert info.value.line == line
+    assert words in str(info.value)
+
+
+# -- shape checks, through the scene loader -------------------------------------------------------
+_TRI = "v 0 0 0\nv 1 0 0\nv 0 0 1\nv 0 1 0\n"
+
+
+@pytest.mark.parametrize("obj, words", [
+    (_TRI + "f 1 2 3\nf 1 2 4\n", "wound the same way"),  # both run 1 -> 2
+    (_TRI + "f 1 2 3\nf 2 1 4\nf 1 2 4\n", "shared by 3 faces"),
+    ("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n", "zero area"),
+    ("v 0 0 0\nv 1 0 0\nv 0 0 1\nv 1 0 1\nf 1 2 3\nf 2 4 3\nf 3 2 4\n", "non-manifold: the edge between vertices"),
+])
+def test_bad_shapes_are_one_line_errors(tmp_path, obj, words):
+    path = _scene(tmp_path, obj, {"path": "shape.obj", "friction": 0.2})
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    text = str(info.value)
+    assert text.startswith(f"{path}: mesh.path: shape.obj: line ")
+    assert words in text and "\n" not in text
+
+
+def test_missing_obj_and_bad_fields_are_errors_naming_the_field(tmp_path):
+    path = _scene(tmp_path, box_obj(), [{"path": "shape.obj", "friction": 0.2}, {"path": "nope.obj", "friction": 0}])
+    with pytest.raises(SceneError, match=r"mesh\[1\]\.path: nope.obj: no such OBJ file"):
+        load_scene(path)
+    for mesh, match in (({"path": "shape.obj", "friction": 2}, r"mesh.friction: must be <= 1"),
+                        ({"path": "shape.obj", "friction": 0, "scale": 0}, r"mesh.scale: must be > 0"),
+                        ({"path": "shape.obj", "friction": 0, "rotation": [0, "x", 0]}, r"mesh.rotation\[1\]"),
+                        ({"path": 3, "friction": 0}, r"mesh.path: expected the path of an OBJ file"),
+                        ({"path": "shape.obj", "friction": 0, "motion": {"keyframes": [[1, [0, 0, 0]], [0.5, [1, 0, 0]]]}},
+                         r"mesh.motion.keyframes\[1\]\[0\]: keyframe times must increase")):
+        path = _scene(tmp_path, box_obj(), mesh)
+        with pytest.raises(SceneError, match=match):
+            load_scene(path)
+
+
+def test_cli_reports_a_bad_obj_in_one_line(tmp_path, cli):
+    path = _scene(tmp_path, box_obj() + "f 1 2 99\n", {"path": "shape.obj", "friction": 0.2})
+    line = error_line(cli("simulate", path, "--frames", "1", "--out", str(tmp_path / "s.npz")))
+    assert line == (f"clothsim: error: {path}: mesh.path: shape.obj: line 16: face index 99 out of range "
+                    f"(1..8, or -1..-8, vertices read so far)")
+
+
+def test_closed_and_open_meshes_are_told_apart_and_inside_out_is_turned(tmp_path):
+    path = _scene(tmp_path, box_obj(), {"path": "shape.obj", "friction": 0})
+    assert load_scene(path).meshes[0].closed
+    path = _scene(tmp_path, box_obj(drop_top=True), {"path": "shape.obj", "friction": 0})
+    assert not load_scene(path).meshes[0].closed
+    # every face reversed: the loader turns it back, so the normals point out again
+    flipped = "\n".join(" ".join(["f", *reversed(line.split()[1:])]) if line.startswith("f ") else line
+                        for line in box_obj().splitlines())
+    spec = load_scene(_scene(tmp_path, flipped, {"path": "shape.obj", "friction": 0})).meshes[0]
+    v = spec.vertices
+    a, b, c = (v[spec.triangles[:, k]] for k in range(3))
+    assert (np.einsum("ij,ij->i", np.cross(b - a, c - a), (a + b + c) / 3) > 0).all()
+
+
+def test_bundled_torus_is_what_the_generator_writes():
+    assert (SCENES / "torus.obj").read_text() == torus_obj(*TORUS)
+    spec = load_scene("mesh").meshes[0]
+    assert spec.closed and spec.triangles.shape == (2 * TORUS[2] * TORUS[3], 3)
+
+
+# -- the grid against brute force -----------------------------------------------------------------
+def test_grid_gives_the_same_contacts_as_brute_force(tmp_path):
+    rng = np.random.default_rng(7)
+    for obj, mesh in ((torus_obj(*TORUS), {"translate": [0.5, 0.3, 0.5], "rotation": [20, 35, -10]}),
+                      (box_obj(0.2, 0.1, 0.3, drop_top=True), {"translate": [0.5, 0.5, 0.5], "scale": 1.5})):
+        scene = load_scene(_scene(tmp_path, obj, {"path": "shape.obj", "friction": 0.25, **mesh}))
+        group = mesh_group(scene)
+        lo = group.verts.min(axis=0) + group.points[0] - 0.05
+        hi = group.verts.max(axis=0) + group.points[0] + 0.05
+        n = 20000
+        last = rng.uniform(lo, hi, (n, 3))
+        pos = last + rng.normal(0.0, 0.01, (n, 3))
+        pos_t, last_t = np.ascontiguousarray(pos.T), np.ascontiguousarray(last.T)
+        grid = mesh_targets(pos_t, last_t, group, False)
+        brute = mesh_targets(pos_t, last_t, group, True)
+        assert grid.tobytes() == brute.tobytes()
+        moved = np.any(grid != pos_t, axis=0).sum()
+        assert moved > 500, moved  # the points met the mesh: the comparison is not vacuous
+
+
+def test_a_point_that_jumps_through_a_sheet_in_one_substep_is_put_back_on_its_side(tmp_path):
+    # 10 cm in one substep, ten times the thickness: only the swept (crossing) test can see it
+    sheet = "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 2 3 4\n"
+    group = mesh_group(load_scene(_scene(tmp_path, sheet, {"path": "shape.obj", "friction": 0.0})))
+    last = np.array([[0.3, 0.05, 0.6], [0.7, -0.05, 0.2]]).T.copy()
+    pos = np.array([[0.32, -0.05, 0.6], [0.7, 0.05, 0.25]]).T.copy()
+    out = mesh_targets(pos, last, group, False)
+    assert np.allclose(out.T, [[0.32, THICKNESS, 0.6], [0.7, -THICKNESS, 0.25]])
+
+
+# -- cloth against meshes -------------------------------------------------------------------------
+@pytest.mark.parametrize("rotation", [(0.0, 0.0, 0.0), (0.0, 30.0, 10.0)])
+def test_cloth_dropped_on_a_box_obj_ends_outside_it(tmp_path, rotation):
+    center, half = (0.5, 0.55, 0.5), (0.15, 0.15, 0.15)
+    path = _scene(tmp_path, box_obj(*half), {"path": "shape.obj", "translate": list(center),
+                                             "rotation": list(rotation), "friction": 0.3})
+    sim = Simulation(load_scene(path))
+    for _ in range(4):
+        sim.step(30)
+        depth = _box_depth(sim.positions, center, half, rotation)
+        assert depth.min() > -0.003, depth.min()  # nothing more than 3 mm inside, at any checked frame
+    # it rests on the box: the points above the top face lie about a thickness above it
+    assert np.isclose(np.percentile(depth, 1), THICKNESS, atol=0.003)
+    assert sim.positions[:, 1].min() < center[1] - half[1]  # and the rest hangs down its sides
+
+
+def test_an_open_mesh_keeps_the_cloth_on_the_side_it_came_from(tmp_path):
+    # One square sheet, wound to face down (-y): the side rule must not depend on the winding.
+    # The cloth starts at y = 1 and falls onto a sheet below it, or rises (gravity up) against one above.
+    sheet = "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 4 3 2\n"
+    for gravity, height in ((-9.8, 0.5), (9.8, 1.5)):
+        path = _scene(tmp_path, sheet, {"path": "shape.obj", "translate": [-0.5, height, -0.5], "scale": 2.0,
+                                        "friction": 0.2})
+        scene = load_scene(path)
+        assert not scene.meshes[0].closed
+        sim = Simulation(scene.with_simulation(gravity=(0.0, gravity, 0.0)))
+        sim.step(60)
+        y = sim.positions[:, 1]
+        if gravity < 0:
+            assert y.min() > height + THICKNESS - 0.002, y.min()
+        else:
+            assert y.max() < height - THICKNESS + 0.002, y.max()
+        assert abs(np.median(y) - height) < 2 * THICKNESS  # it did reach the sheet
+
+
+def test_a_far_mesh_is_skipped_and_changes_nothing(tmp_path):
+    far = _scene(tmp_path, box_obj(0.2, 0.2, 0.2), {"path": "shape.obj", "translate": [5, 0, 5], "friction": 0.3})
+    near = load_scene(far)
+    plain = load_scene(_scene(tmp_path, box_obj(), None))
+    a, b = Simulation(near), Simulation(plain)
+    a.step(20)
+    b.step(20)
+    assert a.colliders_skipped == 20 * 30  # the mesh was ruled out by the bounding box every substep
+    assert a.positions.tobytes() == b.positions.tobytes()
+
+
+def test_a_keyframed_box_lifts_the_cloth_without_leaving_points_inside(tmp_path):
+    # up through the cloth at 1.33 m/s (faster trips the blow-up guard's energy bound, which counts
+    # only the work of gravity)
+    center0, half = (0.5, 0.6, 0.5), (0.12, 0.12, 0.12)
+    motion = {"keyframes": [[0.0, list(center0)], [0.6, [0.5, 1.4, 0.5]]]}
+    path = _scene(tmp_path, box_obj(*half), {"path": "shape.obj", "translate": list(center0), "friction": 0.5,
+                                             "motion": motion})
+    # The cloth is free: pinned corners would stretch it over the box, and Provot's limit, which runs
+    # after the collisions in the spec's order, then pulls points back into the box by millimetres.
+    scene = load_scene(path)
+    track = scene.meshes[0].track()
+    sim = Simulation(scene)
+    lifted = 0.0
+    for _ in range(60):
+        sim.step(1)
+        center = track.at(sim.time)
+        assert _box_depth(sim.positions, center, half).min() > -0.003
+        lifted = max(lifted, sim.positions[:, 1].max())
+    assert lifted > 1.4  # the cloth was carried up, not passed through
+
+
+def test_other_integrators_collide_with_meshes_too(tmp_path):
+    center, half = (0.5, 0.55, 0.5), (0.15, 0.15, 0.15)
+    path = _scene(tmp_path, box_obj(*half), {"path": "shape.obj", "translate": list(center), "friction": 0.3})
+    scene = load_scene(path).with_simulation(integrator="xpbd")
+    sim = Simulation(scene)
+    sim.step(90)
+    assert _box_depth(sim.positions, center, half).min() > -0.003
+    assert sim.positions[:, 1].min() < center[1] - half[1]
+
+
+def test_export_writes_the_mesh_where_it_is(tmp_path):
+    import clothsim
+
+    center, half = (0.5, 0.55, 0.5), (0.15, 0.1, 0.2)
+    path = _scene(tmp_path, box_obj(*half), {"path": "shape.obj", "translate": list(center), "friction": 0.3})
+    clothsim.export(path, tmp_path / "seq", frames=1)
+    written = parse_obj((tmp_path / "seq" / "colliders.obj").read_text())
+    assert "o mesh_0" in (tmp_path / "seq" / "colliders.obj").read_text()
+    assert written.triangles.shape == (12, 3)
+    corners = np.abs(written.vertices - center)
+    np.testing.assert_allclose(corners, np.broadcast_to(half, corners.shape), rtol=1e-6)
+
+
+def test_a_runs_resolved_scene_keeps_its_meshes_and_loads_from_anywhere(tmp_path):
+    from clothsim.scene import scene_from_dict
+    from clothsim.sweeps.params import scene_json
+
+    scene = load_scene("mesh")
+    data = json.loads(json.dumps(scene_json(scene)))
+    again = scene_from_dict(data, str(tmp_path / "elsewhere.json"))  # the OBJ path is absolute there
+    (a,), (b,) = scene.meshes, again.meshes
+    assert (a.translate, a.rotation, a.scale, a.friction, a.closed) == (b.translate, b.rotation, b.scale, b.friction,
+                                                                       b.closed)
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.triangles, b.triangles)
