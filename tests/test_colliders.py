@@ -268,7 +268,7 @@ def test_the_kernel_pose_follows_the_track_and_reset_puts_it_back() -> None:
 def test_a_scene_without_capsules_boxes_or_motion_types_them_as_none() -> None:
     # what keeps their code out of the compiled kernel (see clothsim.sim.state)
     sim = Simulation(load_scene("sphere"))
-    _, _, _, col, mov = sim._kernel_args
+    _, _, _, col, mov, *_ = sim._kernel_args  # (st, spec, grid, col, mov, mesh, wind, pins)
     assert col.capsules is None and col.cuboids is None and col.capsule_on is None and mov is None
     assert math.isclose(sim.time, 0.0)
 

@@ -70,7 +70,7 @@ def test_compile_compiles_everything_ahead_of_time(tmp_path: Path) -> None:
     lines = first.stdout.splitlines()
     assert lines[0].split()[:2] == ["work", "item"]
     items = [line for line in lines[1:-1]]
-    assert len(items) == 15 and any("self-collision grid, colliders" in i for i in items)
+    assert len(items) == 17 and any("self-collision grid, colliders" in i for i in items)
     assert any("bundled scene tablecloth" in i for i in items)
     assert lines[-1].startswith("total")
     # afterwards no command needs a compile: running it again loads every kernel
@@ -92,7 +92,7 @@ def test_bench_compile_reports_each_kernel_of_a_cold_start() -> None:
     assert command.startswith("simulate: clothsim simulate pinned2 --frames 90")
     wall, compile_s = (float(x) for x in command.split()[-2:])
     assert 0 < compile_s < wall
-    assert "sim.frame._member [ClothState, SpecHash, -, -, -]" in out
+    assert "sim.frame._member [ClothState, SpecHash, -, -, -, -, -, -]" in out
     assert "sim.frame.run_substeps" in out
 
 
@@ -100,7 +100,7 @@ def test_bench_compile_rejects_an_unknown_command() -> None:
     done = run_cli("bench", "compile", "--commands", "simulate,nope")
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == [
-        "clothsim: error: --commands: unknown command 'nope' (expected some of: simulate, render, sphere, grid, xpbd)"]
+        "clothsim: error: --commands: unknown command 'nope' (expected some of: simulate, render, sphere, grid, xpbd, flag, capsule, tablecloth, mesh)"]
 
 _CACHE_PROBE = """
 import numpy as np

@@ -33,13 +33,11 @@ import math
 import numpy as np
 from numba import njit
 
-from ..motion import position_at
 from .jit import CHUNKS, EXACT
 from .meshgrid import DIMS_CELL0, DIMS_CLOSED, DIMS_K0, DIMS_K1, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
     INFO_HI, INFO_INV_H, INFO_LO
 from .team import share
-
-_position_at = njit(**EXACT)(position_at)
+from .track import track_at as _position_at
 
 # closest-point features
 FACE, VERTEX_A, VERTEX_B, VERTEX_C, EDGE_AB, EDGE_BC, EDGE_CA = 0, 1, 2, 3, 4, 5, 6

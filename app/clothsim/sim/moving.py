@@ -23,14 +23,12 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from ..motion import position_at as _position_at
-from .jit import EXACT, KERNEL
+from .jit import KERNEL
 from .shapes import CAPSULE_CARRY, CUBOID_CARRY, samples
+from .track import track_at as position_at
 
 #: Kind numbers of a moving collider (the order of the scene's collider kinds).
 KIND_SPHERE, KIND_PLANE, KIND_CAPSULE, KIND_CUBOID = 0, 1, 2, 3
-
-position_at = njit(**EXACT)(_position_at)
 
 
 class Motion(NamedTuple):

@@ -13,16 +13,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..motion import position_at
-from .jit import CHUNKS, EXACT, KERNEL
+from .jit import CHUNKS, KERNEL
 from .team import share
-
-# ``fastmath=False`` said explicitly: Numba compiles a callee that does not set it with its
-# caller's fast-math flags, and as the frame kernel's callee the contracted arithmetic put a pin
-# one ulp off rest + Track.at(t) (the Python evaluation the tests compare with).
-IEEE = {**EXACT, "fastmath": False}
-
-offset_at = njit(**IEEE)(position_at)
+from .track import IEEE
+from .track import track_at as offset_at
 
 
 @njit(inline="always", **KERNEL)
