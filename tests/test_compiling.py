@@ -70,7 +70,8 @@ def test_compile_compiles_everything_ahead_of_time(tmp_path: Path) -> None:
     lines = first.stdout.splitlines()
     assert lines[0].split()[:2] == ["work", "item"]
     items = [line for line in lines[1:-1]]
-    assert len(items) == 11 and any("self-collision grid, colliders" in i for i in items)
+    assert len(items) == 13 and any("self-collision grid, colliders" in i for i in items)
+    assert any("wind" in i for i in items) and any("moving pins" in i for i in items)
     assert lines[-1].startswith("total")
     # afterwards no command needs a compile: running it again loads every kernel
     again = run_cli("compile", timeout=900)
@@ -91,7 +92,7 @@ def test_bench_compile_reports_each_kernel_of_a_cold_start() -> None:
     assert command.startswith("simulate: clothsim simulate pinned2 --frames 90")
     wall, compile_s = (float(x) for x in command.split()[-2:])
     assert 0 < compile_s < wall
-    assert "sim.frame._member [ClothState, SpecHash, -, -]" in out
+    assert "sim.frame._member [ClothState, SpecHash, -, -, -, -]" in out  # no collider, wind or pin pass
     assert "sim.frame.run_substeps" in out
 
 
