@@ -206,3 +206,15 @@ def test_analysis_benchmarks_do_not_load_egl(tmp_path, bench):
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stdout + r.stderr
     assert (tmp_path / "plot.png").exists() and (tmp_path / "out.json").exists()
+
+
+def test_building_the_parser_does_not_load_numba():
+    # Every command pays the parser: --help, --version, a usage error and a sweep's parent answer
+    # without the third of a second Numba's import costs.
+    import subprocess
+    import sys
+
+    code = ("import sys, clothsim.cli as c; c.build_parser(); "
+            "sys.exit(3 if 'numba' in sys.modules or 'clothsim.sim' in sys.modules else 0)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stdout + r.stderr

@@ -360,3 +360,26 @@ def test_api_and_local_dask_cluster_give_identical_arrays(tmp_path: Path, scene_
             assert a.files == b.files
             for key in a.files:
                 assert np.array_equal(a[key], b[key]), key
+
+
+def test_script_without_main_guard_gets_one_clear_error(tmp_path: Path, scene_file: Path) -> None:
+    # Workers are spawned and import the caller's script: unguarded, each would start a sweep.
+    script = tmp_path / "unguarded.py"
+    script.write_text(f"import clothsim\nclothsim.sweep({str(scene_file)!r}, {{'cloth.ks': [1, 2]}}, "
+                      f"{str(tmp_path / 'out')!r}, frames=1, workers=1)\n")
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 1
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("clothsim.errors.ClothsimError: the sweep's worker processes stopped while starting"), last
+    assert "unguarded.py must call clothsim.sweep under 'if __name__ == \"__main__\":'" in last
+    assert not (tmp_path / "out").exists()
+
+
+def test_bench_sweep_prints_every_variant(tmp_path: Path, scene_file: Path) -> None:
+    r = run_cli("bench", "sweep", str(scene_file), "--runs", "2", "--frames", "3", "--workers", "1")
+    assert r.returncode == 0, r.stderr
+    rows = {line.split("  ")[0]: line for line in r.stdout.splitlines()}
+    for name in ("plain API loop (script), 1 Numba thread", "clothsim sweep --workers 1",
+                 "plain loop in this process (kernels loaded), 1 Numba thread"):
+        assert name in rows, r.stdout
+    assert rows["clothsim sweep --workers 1"].rstrip().endswith("1.00x"), r.stdout  # its own "vs 1 worker"

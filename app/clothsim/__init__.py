@@ -6,14 +6,18 @@ from typing import Any
 
 from .errors import ClothsimError, SceneError
 from .scene import Scene, load_scene
-from .sim import Simulation
 
 __version__ = "0.1.0"
 __all__ = ["ClothsimError", "Renderer", "Scene", "SceneError", "Simulation", "export", "load_scene", "sweep", "__version__"]
 
 
 def __getattr__(name: str) -> Any:
-    # The renderer pulls in moderngl/EGL; load it only when asked for.
+    # The simulator pulls in Numba (a third of a second), the renderer moderngl/EGL: load each
+    # only when asked for, so commands that do neither (a sweep's parent, --help) start at once.
+    if name == "Simulation":
+        from .sim import Simulation
+
+        return Simulation
     if name == "Renderer":
         from .render.renderer import Renderer
 

@@ -85,9 +85,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    from .compiling import install_notice
+    if getattr(args, "kernels", True):  # a command that runs no kernel here does not load Numba
+        from .compile_watch import install_notice
 
-    install_notice()
+        install_notice()
     try:
         return int(args.func(args) or 0)
     except ClothsimError as exc:

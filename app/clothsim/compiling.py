@@ -1,5 +1,6 @@
-"""The Numba kernels' compile on first use: a notice while it happens, a record of what was compiled
-and for how long, and :func:`compile_all` (``clothsim compile``) to do it ahead of time.
+"""The Numba kernels' compile: :func:`compile_all` (``clothsim compile``) to do it ahead of time,
+and a cold start's second process. The notice and the record of compiles are in
+:mod:`clothsim.compile_watch`.
 
 Kernels are compiled for this CPU the first time a scene needs them and cached on disk (next to
 the installed package, or in Numba's user-wide cache when that folder is read-only). A warm
@@ -13,125 +14,12 @@ import os
 import pickle
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
-from typing import Any, TextIO
+from typing import TYPE_CHECKING, Any
 
-from numba.core import event
-
-#: Cold compile of the frame kernel as a user first meets it (``clothsim simulate pinned2``, every
-#: cache empty, measured with ``clothsim bench compile`` on a 2-core machine).
-FIRST_RUN_SECONDS = 15
-
-
-@dataclass(frozen=True)
-class Compiled:
-    """One compile: the kernel, the groups or types it was compiled for, and its seconds
-    (``own``: not counting the kernels it called that were compiled inside it)."""
-
-    kernel: str
-    variant: str
-    seconds: float
-    own: float
-    depth: int
-
-
-def _kernel_name(data: dict[str, Any]) -> tuple[str, str]:
-    disp = data.get("dispatcher")
-    func = getattr(disp, "py_func", None)
-    name = f"{func.__module__}.{func.__qualname__}" if func is not None else str(disp)
-    args = data.get("args") or ()
-    # the frame kernel's state groups by name ("-" for a pass the scene does not use)
-    groups = [getattr(getattr(a, "instance_class", None), "__name__", None) or ("-" if str(a) == "none" else None)
-              for a in args]
-    variant = ", ".join(g for g in groups if g) if any(g and g != "-" for g in groups) else ""
-    return name, variant
-
-
-class CompileRecorder(event.Listener):
-    """Collects every Numba compile of this process as :class:`Compiled` records."""
-
-    def __init__(self) -> None:
-        self.records: list[Compiled] = []
-        self._stack: list[list[float]] = []
-
-    def on_start(self, ev: event.Event) -> None:
-        self._stack.append([time.perf_counter(), 0.0])
-
-    def on_end(self, ev: event.Event) -> None:
-        began, inner = self._stack.pop()
-        seconds = time.perf_counter() - began
-        if self._stack:
-            self._stack[-1][1] += seconds
-        name, variant = _kernel_name(ev.data)
-        self.records.append(Compiled(name, variant, seconds, seconds - inner, len(self._stack)))
-
-    def total(self) -> float:
-        """Seconds spent compiling (outermost compiles only)."""
-        return sum(r.seconds for r in self.records if r.depth == 0)
-
-
-class CompileNotice(event.Listener):
-    """Says on ``stream`` that kernels are being compiled, once, when the first compile starts;
-    on a terminal it also shows which kernel and the seconds so far while a compile runs."""
-
-    def __init__(self, stream: TextIO = sys.stderr, estimate: float = FIRST_RUN_SECONDS) -> None:
-        self.stream = stream
-        self.estimate = estimate
-        self.announced = False
-        self.depth = 0
-        self.kernel = ""
-        self._bar: Any = None
-        self._began = 0.0
-        self._lock = threading.Lock()
-
-    def on_start(self, ev: event.Event) -> None:
-        with self._lock:
-            self.depth += 1
-            if self.depth > 1:
-                return
-            self.kernel = _kernel_name(ev.data)[0].rsplit(".", 1)[-1].lstrip("_")
-            if not self.announced:
-                self.announced = True
-                self._began = time.perf_counter()
-                print(f"clothsim: compiling kernels for this CPU (first run only, about {self.estimate:.0f} s)...",
-                      file=self.stream, flush=True)
-                if self.stream.isatty():
-                    threading.Thread(target=self._tick, name="clothsim-compile-progress", daemon=True).start()
-            if self.stream.isatty() and self._bar is None:
-                # made here, not in the thread: tqdm's first lock taken in a second thread while
-                # this one is compiling (and importing) can hang that thread
-                from tqdm import tqdm
-
-                self._bar = tqdm(total=round(self.estimate), desc=f"compiling {self.kernel}", unit="s",
-                                 file=self.stream, leave=False, bar_format="{desc}: {bar} {n:.0f}/{total:.0f} s")
-
-    def on_end(self, ev: event.Event) -> None:
-        with self._lock:
-            self.depth -= 1
-            if self.depth == 0 and self._bar is not None:
-                # cleared before the command prints anything of its own
-                self._bar.close()
-                self._bar = None
-
-    def _tick(self) -> None:
-        while True:
-            time.sleep(0.25)
-            with self._lock:
-                if self._bar is not None:
-                    self._bar.n = min(time.perf_counter() - self._began, self._bar.total)
-                    self._bar.set_description_str(f"compiling {self.kernel}", refresh=False)
-                    self._bar.refresh()
-
-
-def install_notice(stream: TextIO = sys.stderr) -> CompileNotice:
-    """Register a :class:`CompileNotice` for the rest of this process."""
-    notice = CompileNotice(stream)
-    event.register("numba:compile", notice)
-    return notice
-
+if TYPE_CHECKING:
+    from .compile_watch import Compiled
 
 # ---------------------------------------------------------------------------------------------
 # A cold start on two cores
@@ -179,6 +67,8 @@ def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], 
     the kernel is cached already, or when the second process fails, nothing is done here and the
     caller's compile happens in this process as usual.
     """
+    from numba.core import event
+
     from .sim.team import available_cores
 
     if os.environ.get(JOBS_VARIABLE) == "1" or available_cores() < 2 or _is_cached(dispatcher, argtypes):
@@ -260,6 +150,10 @@ def record_command(log_path: str, argv: Sequence[str]) -> int:
     ``clothsim bench compile`` in a fresh process)."""
     from .cli import main
 
+    from numba.core import event
+
+    from .compile_watch import CompileRecorder
+
     recorder = CompileRecorder()
     event.register("numba:compile", recorder)
     began = time.perf_counter()
@@ -298,6 +192,10 @@ def run_compile(args: Any) -> int:
 
 def each_item():  # noqa: ANN201
     """Run :func:`work_items` one by one, yielding (label, seconds, compiles made) after each."""
+    from numba.core import event
+
+    from .compile_watch import CompileRecorder
+
     recorder = CompileRecorder()
     event.register("numba:compile", recorder)
     try:

@@ -23,6 +23,7 @@ import json
 import math
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -30,8 +31,9 @@ from ..atomic import atomic_output
 from .plotting import save_grid_figure
 from ..errors import ClothsimError, SimulationBlowUp
 from ..scene import INTEGRATORS, Scene, SphereSpec, load_scene
-from ..sim import Simulation
-from ..sim.integrators import damping_rate
+
+if TYPE_CHECKING:
+    from ..sim import Simulation
 
 SMOOTH_PROBLEMS = ("two_mass", "pinned4", "pinned2")
 #: A problem whose 1e-12 perturbation grows beyond this factor is cut short (see run_problem).
@@ -78,6 +80,9 @@ def two_mass_start(sim: Simulation) -> None:
 
 def two_mass_exact(scene: Scene, t: float) -> np.ndarray:
     """Closed form: r'' = -(2k/m)(r - L) - c r', r(0) = L + stretch, r'(0) = 0; positions (4, 3)."""
+    from ..sim import Simulation
+    from ..sim.integrators import damping_rate
+
     c = damping_rate(scene.cloth.damping)
     m = scene.cloth.width * scene.cloth.height * scene.cloth.density / 4.0
     w0 = math.sqrt(2.0 * scene.cloth.ks / m)
@@ -118,6 +123,8 @@ def problem_scene(problem: str, grid: int) -> Scene:
 
 def simulate(scene: Scene, problem: str, integrator: str, substeps: int, frames: int) -> tuple[float, np.ndarray | None]:
     """Run and time; returns (seconds, final positions or None if it blew up)."""
+    from ..sim import Simulation
+
     sim = Simulation(scene.with_simulation(integrator=integrator, simulation_steps=substeps))
     if problem == "two_mass":
         two_mass_start(sim)
@@ -136,6 +143,8 @@ def perturbation_growth(scene: Scene, frames: int, substeps: int = 256, eps: flo
     the state past that point is decided by round-off and discretisation noise, so no step
     size converges to it and no order of convergence can show.
     """
+    from ..sim import Simulation
+
     size = max(scene.cloth.width, scene.cloth.height)
     a = Simulation(scene.with_simulation(simulation_steps=substeps))
     b = Simulation(scene.with_simulation(simulation_steps=substeps))

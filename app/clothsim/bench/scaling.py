@@ -7,7 +7,6 @@ import statistics
 import time
 
 from ..scene import BYTES_PER_POINT, MAX_SUBSTEPS, available_memory, load_scene
-from ..sim import Simulation
 from ..validate import check, integer
 
 
@@ -24,6 +23,8 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Print the table: the pinned4 scene at each size (1 m cloth, spec parameters, thickness
     scaled with the point spacing)."""
+    from ..sim import Simulation
+
     for n in args.sizes:
         check(integer(ge=2), n, "--sizes")  # a side of one point has no springs (and no spacing)
     check(integer(ge=1, le=MAX_SUBSTEPS), args.substeps, "--substeps")

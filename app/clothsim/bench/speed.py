@@ -9,9 +9,7 @@ import statistics
 import time
 
 from ..scene import bundled_scene_names, load_scene
-from ..sim import Simulation
 from ..validate import check, integer
-from .numpy_baseline import NumpyCloth
 
 
 def median_ms_per_frame(step, frames: int, repeats: int) -> float:  # noqa: ANN001
@@ -39,6 +37,9 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print the table."""
+    from ..sim import Simulation
+    from .numpy_baseline import NumpyCloth
+
     for flag, value, low in (("--frames", args.frames, 1), ("--repeats", args.repeats, 1),
                              ("--warmup", args.warmup, 0), ("--baseline-frames", args.baseline_frames, 1)):
         check(integer(ge=low), value, flag)

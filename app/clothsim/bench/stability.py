@@ -22,8 +22,6 @@ from ..atomic import atomic_output
 from .plotting import save_grid_figure
 from ..errors import ClothsimError, SimulationBlowUp
 from ..scene import INTEGRATORS, Scene, load_scene
-from ..sim import Simulation
-from ..sim.guard import ENERGY_FACTOR, ENERGY_SLACK, EXPLICIT_INTEGRATORS, stable_dt, substeps_for_dt
 
 
 def base_scene(grid: int) -> Scene:
@@ -35,6 +33,8 @@ def base_scene(grid: int) -> Scene:
 
 def run_point(scene: Scene, frames: int) -> tuple[bool, str]:
     """(stable, reason) of one run of ``frames`` frames."""
+    from ..sim import Simulation
+
     sim = Simulation(scene)
     try:
         sim.step(frames)
@@ -46,6 +46,8 @@ def run_point(scene: Scene, frames: int) -> tuple[bool, str]:
 def sweep(integrators: tuple[str, ...], ks_values: list[float], densities: list[float], substeps: list[int],
           grid: int, end_time: float, log=print) -> list[dict]:  # noqa: ANN001
     """Every run of the sweep as dicts (integrator, ks, density, substeps, stable, reason, predicted)."""
+    from ..sim.guard import stable_dt, substeps_for_dt
+
     base = base_scene(grid)
     frames = max(1, round(end_time * base.simulation.frames_per_sec))
     out = []
@@ -81,6 +83,8 @@ def measured_edges(runs: list[dict], name: str) -> list[tuple[float, float, int 
 
 def summarise(runs: list[dict], integrators: tuple[str, ...], substeps: list[int]) -> dict:
     """Per integrator: counts, and for explicit ones how the bound compares with the measured edge."""
+    from ..sim.guard import EXPLICIT_INTEGRATORS
+
     summary = {}
     for name in integrators:
         mine = [r for r in runs if r["integrator"] == name]
@@ -107,6 +111,8 @@ def summarise(runs: list[dict], integrators: tuple[str, ...], substeps: list[int
 def plot_map(runs: list[dict], integrators: tuple[str, ...], grid: int, fps: float, dest: str) -> None:
     """Per integrator: stable/blew-up markers over (ks/density, substeps) with the explicit bound line."""
     import matplotlib
+
+    from ..sim.guard import stable_dt
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -156,6 +162,8 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Sweep, print the summary, write the map (and JSON)."""
+    from ..sim.guard import ENERGY_FACTOR, ENERGY_SLACK, EXPLICIT_INTEGRATORS
+
     n_ks = args.ks_count or (4 if args.quick else 7)
     n_rho = args.density_count or (2 if args.quick else 4)
     max_sub = args.max_substeps or (16 if args.quick else 64)

@@ -12,32 +12,10 @@ import math
 import numpy as np
 from numba import njit
 
+from ..cloth import cloth_triangles, cloth_uvs  # noqa: F401 - the grid's, drawn here
 from ..sim.jit import EXACT
 
 CLOTH_FLOATS = 9  # position(3) normal(3) tangent(3)
-
-
-def cloth_triangles(nw: int, nh: int) -> np.ndarray:
-    """Triangle indices (T*3,) uint32, two per grid quad.
-
-    With A=(x,y), B=(x+1,y), C=(x,y+1), D=(x+1,y+1) the triangles are (A,C,B) and (B,C,D), so a
-    horizontal cloth's front face (counter-clockwise) points up (+y).
-    """
-    idx = np.arange(nw * nh, dtype=np.uint32).reshape(nh, nw)
-    a = idx[:-1, :-1].ravel()
-    b = idx[:-1, 1:].ravel()
-    c = idx[1:, :-1].ravel()
-    d = idx[1:, 1:].ravel()
-    tris = np.stack([a, c, b, b, c, d], axis=1)
-    return np.ascontiguousarray(tris.ravel())
-
-
-def cloth_uvs(nw: int, nh: int) -> np.ndarray:
-    """Texture coordinates (N, 2) float32: u along x_index, v along y_index, both in [0, 1]."""
-    u = np.linspace(0.0, 1.0, nw, dtype=np.float32)
-    v = np.linspace(0.0, 1.0, nh, dtype=np.float32)
-    uu, vv = np.meshgrid(u, v)
-    return np.ascontiguousarray(np.stack([uu.ravel(), vv.ravel()], axis=1))
 
 
 @njit(inline="always", **EXACT)

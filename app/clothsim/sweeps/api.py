@@ -172,11 +172,11 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
         if data is not None:
             if result["status"] == "done":
                 sc = scenes[run.id]
-                from ..exporters.geometry import cloth_faces, cloth_uvs
+                from ..cloth import cloth_triangles, cloth_uvs  # not the renderer's module: no Numba here
 
                 arrays = {
                     "positions": result["positions"],
-                    "faces": cloth_faces(result["nw"], result["nh"]).astype(np.int32),
+                    "faces": cloth_triangles(result["nw"], result["nh"]).astype(np.int32).reshape(-1, 3),
                     "uv": np.asarray(cloth_uvs(result["nw"], result["nh"]), dtype=np.float32),
                     "pinned": np.asarray(result["pinned"], dtype=bool),
                     "scene": np.array(json.dumps(P.scene_json(sc))),

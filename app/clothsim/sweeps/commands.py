@@ -38,7 +38,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="run on an existing Dask cluster, e.g. tcp://host:8786 (pip install 'clothsim[cluster]')")
     p.add_argument("--video", action="store_true", help="dataset: also write runs/<id>.mp4 of the sampled frames")
-    p.set_defaults(func=run_sweep)
+    p.set_defaults(func=run_sweep, kernels=False)  # the workers run them
 
 
 def run_sweep(args: argparse.Namespace) -> int:

@@ -13,6 +13,7 @@ import contextlib
 import multiprocessing
 import os
 import signal
+import sys
 from collections.abc import Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 
@@ -52,24 +53,40 @@ def import_distributed(label: str = "--scheduler") -> object:
 
 
 def _start_workers(executor: ProcessPoolExecutor, count: int) -> None:
-    """Start every worker now, with Ctrl-C ignored from their first instruction.
+    """Start every worker now, with Ctrl-C ignored from their first instruction, and wait until
+    they answer: a worker that cannot start is one clear error here, not a run lost later.
 
     The pool starts a process per submitted task until it has ``count``; a process started while
     SIGINT is ignored inherits that (across exec), so a Ctrl-C during its start-up cannot print a
     traceback from inside multiprocessing. The command's own handler is back right after.
     """
     import threading
+    from concurrent.futures import wait
 
     main = threading.current_thread() is threading.main_thread()
     previous = signal.getsignal(signal.SIGINT) if main else None
     if main and previous is not None:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        for _ in range(count):
-            executor.submit(os.getpid)
+        started = [executor.submit(os.getpid) for _ in range(count)]
     finally:
         if main and previous is not None:
             signal.signal(signal.SIGINT, previous)
+    wait(started)
+    if any(f.exception() is not None for f in started):
+        raise ClothsimError(f"the sweep's worker processes stopped while starting{_start_hint()}")
+
+
+def _start_hint() -> str:
+    # A spawned worker first imports the caller's main script; a script that calls sweep() at
+    # its top level then starts a sweep inside every worker, which multiprocessing refuses.
+    main = sys.modules.get("__main__")
+    path = getattr(main, "__file__", None)
+    spec = getattr(getattr(main, "__spec__", None), "name", "") or ""
+    if path is None or spec.startswith("clothsim") or os.path.basename(path) == "clothsim":
+        return " (see the messages above)"
+    return (f" (see the messages above): a script such as {os.path.basename(path)} must call clothsim.sweep "
+            "under 'if __name__ == \"__main__\":', since each worker process imports the main script")
 
 
 @contextlib.contextmanager
