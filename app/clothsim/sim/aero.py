@@ -38,6 +38,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from ..cloth import cloth_triangles
 from .jit import CHUNKS, KERNEL
 from .team import share
 
@@ -210,15 +211,9 @@ def add_wind(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, wind: tuple,
 
 
 def triangles(nw: int, nh: int) -> np.ndarray:
-    """(3, T) uint64 corners of the render mesh's triangles (:func:`clothsim.render.mesh.cloth_triangles`'
-    order), without importing the renderer."""
-    # unsigned: an index that cannot be negative needs no wrap-around check on every load
-    idx = np.arange(nw * nh, dtype=np.uint64).reshape(nh, nw)
-    a = idx[:-1, :-1].ravel()
-    b = idx[:-1, 1:].ravel()
-    c = idx[1:, :-1].ravel()
-    d = idx[1:, 1:].ravel()
-    return np.ascontiguousarray(np.stack([a, c, b, b, c, d], axis=1).reshape(-1, 3).T)
+    """(3, T) corners of the mesh's triangles (:func:`clothsim.cloth.cloth_triangles`, the
+    renderer's), unsigned: an index that cannot be negative needs no wrap-around check on each load."""
+    return np.ascontiguousarray(cloth_triangles(nw, nh).reshape(-1, 3).T.astype(np.uint64))
 
 
 def incidence(tris: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
