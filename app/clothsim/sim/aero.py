@@ -5,10 +5,10 @@ cloth velocity v = the mean of its three points' Verlet velocities (x - x_last) 
 v_rel = u - v):
 
 * drag along the normal, F_D = 1/2 rho C_d A (v_rel . n) |v_rel . n| n: the normal-pressure
-  ("cross-flow") form of a flat plate's drag (Hoerner, *Fluid-Dynamic Drag*, 1965, ch. 3), as
-  used per triangle for cloth by Provot-style mass-spring aerodynamics and by Keckeisen,
-  Kimmerle, Thomaszewski and Wacker, "Modelling effects of wind fields in cloth animations",
-  Journal of WSCG 12 (2004);
+  ("cross-flow") form of a flat plate's drag (Hoerner, *Fluid-Dynamic Drag*, 1965), applied per
+  triangle as cloth simulators do (e.g. Keckeisen, Kimmerle, Thomaszewski and Wacker, "Modelling
+  effects of wind fields in cloth animations", Journal of WSCG 12, 2004: drag and lift per
+  triangle);
 * lift across the flow, F_L = 1/2 rho C_L A |v_rel|^2 sin(2 alpha) l, alpha the angle of attack
   (between v_rel and the triangle's plane) and l the unit vector perpendicular to v_rel in the
   plane of v_rel and n, on the side the air pushes: the flat plate's lift curve C_L sin 2 alpha
