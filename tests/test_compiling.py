@@ -72,6 +72,7 @@ def test_compile_compiles_everything_ahead_of_time(tmp_path: Path) -> None:
     items = [line for line in lines[1:-1]]
     assert len(items) == 17 and any("self-collision grid, colliders" in i for i in items)
     assert any("bundled scene tablecloth" in i for i in items)
+    assert any("wind" in i for i in items) and any("moving pins" in i for i in items)
     assert lines[-1].startswith("total")
     # afterwards no command needs a compile: running it again loads every kernel
     again = run_cli("compile", timeout=900)

@@ -39,6 +39,10 @@ SELF_COLLISION_MODES = ("spec", "grid", "off")
 # not see (Numba's allocations inside kernels) and for the output's copies (.npz, vertex buffers).
 BYTES_PER_POINT = 1024
 BYTES_PER_POINT_OTHER_INTEGRATORS = 1728
+# Added by a blowing wind (counted from its arrays, not measured): two triangles a point, each
+# with its corners (3 x 8 B), force (3 x 8 B) and work space (12 x 8 B), and a point's list of
+# triangles (7 x 8 B): 344 B, plus 25 %.
+WIND_BYTES_PER_POINT = 432
 
 
 @dataclass(frozen=True)
@@ -265,7 +269,7 @@ def scene_from_dict(data: Any, path: str = "<scene>") -> Scene:
         raise SceneError(path, "", f"top level must be a JSON object, got {V.shown(data)}")
     values = SCENE(data, V.At(path))
     cloth = ClothSpec(**values["cloth"])
-    _check_memory(cloth, values["simulation"], path)
+    _check_memory(cloth, values["simulation"], path, values["winds"])
     return Scene(cloth=cloth, spheres=values["spheres"], planes=values["planes"], capsules=values["capsules"],
                  boxes=values["boxes"], winds=values["winds"], simulation=values["simulation"],
                  render=values["render"], path=path, meshes=values["meshes"])
@@ -544,11 +548,12 @@ def bytes_per_point(simulation: SimulationSpec) -> int:
 
 def check_memory(scene: Scene) -> None:
     """Refuse (SceneError naming the grid size) a scene whose run would not fit in memory."""
-    _check_memory(scene.cloth, scene.simulation, scene.path)
+    _check_memory(scene.cloth, scene.simulation, scene.path, scene.winds)
 
 
-def _check_memory(cloth: ClothSpec, simulation: SimulationSpec, path: str) -> None:
-    need = cloth.num_points * bytes_per_point(simulation)
+def _check_memory(cloth: ClothSpec, simulation: SimulationSpec, path: str, winds: tuple = ()) -> None:
+    blowing = any(not w.still for w in winds)
+    need = cloth.num_points * (bytes_per_point(simulation) + (WIND_BYTES_PER_POINT if blowing else 0))
     avail = available_memory()
     if need > avail:
         raise SceneError(

@@ -30,7 +30,7 @@ from numba import njit, prange, types
 
 from .jit import CHUNKS, KERNEL, PARALLEL, call_native, native_address
 
-from .aero import wind_chunk, wind_gather
+from .aero import wind_chunks, wind_gather
 from .collide import collide_planes, collide_spheres
 from .constraints import provot_band, provot_bands, provot_cut
 from .forces import gather_chunk, spring_job
@@ -280,8 +280,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 # the triangles' wind forces read only positions: same phase as the springs
                 now = substep_time(wind.clock, substep, wind.dt)
                 w0, w1 = share(CHUNKS, member, size)
-                for c in range(w0, w1):
-                    wind_chunk(pos, last, wind, now, c)
+                wind_chunks(pos, last, wind, now, w0, w1)
             if pins is not None:
                 offset_at(pins.times, pins.points, pins.velocity, substep_time(pins.clock, substep + 1, pins.dt), offset)
             gen = barrier(sync, size, gen)
