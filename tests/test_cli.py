@@ -157,7 +157,7 @@ def test_profile_lists_passes_and_what_was_skipped(tmp_path):
     for name in ("forces", "integrate", "provot"):
         assert name in r.stdout
     assert "self-collision: simulation.self_collision is false" in r.stdout
-    assert "colliders: scene has no sphere, plane or mesh" in r.stdout
+    assert "colliders: scene has no sphere, plane, capsule, box or mesh" in r.stdout
     r = run_cli("simulate", "sphere", "--frames", "20", "--profile", "--out", str(tmp_path / "s.npz"))
     assert r.returncode == 0, r.stderr
     assert "colliders" in r.stdout and "self-collision" in r.stdout and "bounding-box" in r.stdout

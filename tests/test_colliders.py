@@ -32,7 +32,7 @@ def _scene(**objects) -> dict:
     return {"cloth": _cloth(), **objects}
 
 
-def _box_rows(box, points: np.ndarray) -> np.ndarray:
+def _box_distance(box, points: np.ndarray) -> np.ndarray:
     """Signed distance of each point from an oriented box (negative inside)."""
     rot = np.array(box.matrix())
     q = (points - np.array(box.center)) @ rot  # into the box's axes
@@ -193,7 +193,7 @@ def test_cloth_dropped_on_a_capsule_ends_outside_it() -> None:
 def test_cloth_dropped_on_a_rotated_box_ends_outside_it() -> None:
     box = {"center": [0.4, 0.45, 0.4], "half_extents": [0.25, 0.1, 0.15], "rotation": [10, 30, 5], "friction": 0.3}
     sim = _dropped(FAR_CAPSULE, box)
-    dist = _box_rows(sim.scene.boxes[0], sim.positions)
+    dist = _box_distance(sim.scene.boxes[0], sim.positions)
     assert dist.min() > -2e-3, dist.min()
     assert dist.min() < 0.02
     assert sim.positions[:, 1].min() < 0.3
@@ -244,7 +244,7 @@ def test_cloth_on_a_moving_box_is_carried_along_by_friction() -> None:
         sim.step(63)  # the slide, and 0.1 s more
         moved[f] = sim.positions[:, 0].mean() - start
         top = posed(sim.scene.boxes[0], sim.time)
-        assert _box_rows(top, sim.positions).min() > -1e-3  # still on top, not inside
+        assert _box_distance(top, sim.positions).min() > -1e-3  # still on top, not inside
     # A point resting on the box touches it every few substeps (it sits SURFACE_OFFSET above the
     # face and falls back in), and each touch keeps 1 - friction of its velocity relative to the box.
     assert moved[0.9] == pytest.approx(0.3, abs=0.03)  # moved with the box

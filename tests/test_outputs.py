@@ -397,7 +397,9 @@ def test_a_missing_path_never_falls_back_to_a_bundled_scene(tmp_path):
     for scene in ("/nonexistent/dir/sphere.json", "sphere.json", "scenes/sphere.json", "nosuchscene"):
         line = error_line(run_cli("simulate", scene, "--frames", "1", "--out", str(out), cwd=tmp_path))
         assert line.startswith(f"clothsim: error: {scene}: no such scene file (bundled scenes: "), line
-    assert line.endswith("selfCollision, sphere)")
+    from clothsim.scene import bundled_scene_names
+
+    assert line.endswith("(bundled scenes: " + ", ".join(bundled_scene_names()) + ")")
     assert list(tmp_path.iterdir()) == []
     assert error_line(run_cli("simulate", "/nonexistent/dir/sphere.json", "--out", str(out))).endswith(
         "; the bundled scene is named without a path or .json: sphere")

@@ -256,8 +256,8 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             box = np.empty(6)
             sphere_on = np.empty(col.spheres.shape[0], dtype=np.bool_)
             plane_on = np.empty(col.planes.shape[0], dtype=np.bool_)
-            capsule_on = flags_for(col.capsules)
-            cuboid_on = flags_for(col.cuboids)
+            capsule_on = flags_for(col.capsules, col.capsule_on)
+            cuboid_on = flags_for(col.cuboids, col.cuboid_on)
         # Moving colliders: member 0 poses them at the start of the collider pass, behind one
         # more barrier (the pass reads the poses right after).
         posing = moving(mov)

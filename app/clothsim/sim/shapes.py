@@ -252,10 +252,12 @@ def collide_shapes(pos: np.ndarray, last: np.ndarray, part: np.ndarray, capsules
 
 
 @njit(**KERNEL)
-def flags_for(rows: np.ndarray | None) -> np.ndarray | None:
-    """A member's own reach flags for one kind's rows (``None`` for a kind the scene lacks)."""
+def flags_for(rows: np.ndarray | None, flags: np.ndarray | None) -> np.ndarray | None:
+    """A member's own reach flags for one kind's rows: ``flags`` itself (None) for a kind the
+    scene lacks. (Both branches return the same type when the kind is there: a ``return None``
+    there would make the flags an optional array, checked at every use.)"""
     if rows is None:
-        return None
+        return flags
     return np.empty(rows.shape[0], dtype=np.bool_)
 
 
