@@ -54,7 +54,8 @@ class Simulation:
         self._plane_on = np.zeros(len(self._planes), dtype=np.bool_)
         # triangle meshes: packed and their grids built once (None without any)
         self._meshes = mesh_group(scene)
-        self._time = self._frame_start = 0.0
+        # the clock of moving colliders: time = base + substeps * dt (rebased when dt changes)
+        self._clock_base, self._clock_dt, self._substeps, self._frame_substeps = 0.0, self.dt, 0, 0
         m = table_size(n)
         self._keys = np.zeros(n, dtype=np.int64)
         self._slots = np.zeros(n, dtype=np.int64)
@@ -213,6 +214,8 @@ class Simulation:
         elif self._self_mode == MODE_GRID:
             grid = GridHash(self.free, cloth.thickness, steps, self._cell, self._keys, self._slots, self._table,
                             self._order)
+        if dt != self._clock_dt:
+            self._clock_base, self._clock_dt, self._substeps = self.time, dt, 0
         if self._meshes is not None:
             self._meshes.clock[1] = dt
         if len(self._spheres) + len(self._planes) > 0 or self._meshes is not None:
@@ -231,12 +234,12 @@ class Simulation:
         self.frame = 0
         self.colliders_skipped = 0
         self.integrator_state = None
-        self._time = self._frame_start = 0.0
+        self._clock_base, self._clock_dt, self._substeps, self._frame_substeps = 0.0, self.dt, 0, 0
 
     @property
     def time(self) -> float:
         """Seconds simulated since the start (or the last :meth:`reset`): where moving colliders are."""
-        return self._time
+        return self._clock_base + self._substeps * self._clock_dt
 
     @property
     def colliders_still_after(self) -> float:
@@ -256,12 +259,12 @@ class Simulation:
     def _set_clock(self) -> None:
         # where the next kernel call starts in time (moving meshes read it)
         if self._meshes is not None:
-            self._meshes.clock[0] = self._time
-            self._meshes.clock[2] = 0.0
+            self._meshes.clock[0] = self._clock_base
+            self._meshes.clock[2] = float(self._substeps)
 
     def _tick(self, steps: int) -> None:
         """Count ``steps`` substeps as done (the clock of moving colliders)."""
-        self._time += steps * self.dt
+        self._substeps += steps
 
     def step(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``simulation_steps`` substeps each.
@@ -317,7 +320,7 @@ class Simulation:
         self._pos[...] = saved[0]
         self._last[...] = saved[1]
         self.integrator_state = None if saved[2] is None else saved[2].copy()
-        self._time = self._frame_start
+        self._substeps = self._frame_substeps
 
     def _advance_frame(self, run=None) -> None:  # noqa: ANN001
         """One frame through ``run(steps, saved)`` (default :meth:`_run`), under the blow-up guard."""
@@ -328,7 +331,7 @@ class Simulation:
         run = run or self._run
         state = self.integrator_state
         saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy())
-        self._frame_start = self._time
+        self._frame_substeps = self._substeps
         steps = self.scene.simulation.simulation_steps
         run(steps, saved)
         if sim_blow_up_reason(self) is not None:
