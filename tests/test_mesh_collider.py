@@ -278,3 +278,16 @@ def test_the_pass_by_pass_profile_gives_the_same_bits_with_a_moving_mesh(tmp_pat
     assert profiled.time == plain.time
     assert plain.positions.tobytes() == profiled.positions.tobytes()
     assert plain.positions[:, 1].max() > 1.0  # the box did lift the cloth
+
+
+def test_motion_moves_the_translation_and_holds_off_rest(tmp_path):
+    path = _scene(tmp_path, box_obj(), {"path": "shape.obj", "translate": [1, 2, 3], "friction": 0,
+                                        "motion": {"velocity": [0.5, 0, -1]}})
+    scene = load_scene(path)
+    assert scene.meshes[0].track().at(2.0).tolist() == [2.0, 2.0, 1.0]
+    assert Simulation(scene).colliders_still_after == float("inf")
+    keyed = load_scene(_scene(tmp_path, box_obj(), {"path": "shape.obj", "friction": 0,
+                                                    "motion": {"keyframes": [[0.5, [0, 0, 0]], [1.25, [0, 1, 0]]]}}))
+    assert Simulation(keyed).colliders_still_after == 1.25
+    static = load_scene(_scene(tmp_path, box_obj(), {"path": "shape.obj", "translate": [1, 2, 3], "friction": 0}))
+    assert static.meshes[0].track().at(7.0).tolist() == [1.0, 2.0, 3.0]
