@@ -99,7 +99,7 @@ def test_bench_compile_rejects_an_unknown_command() -> None:
     done = run_cli("bench", "compile", "--commands", "simulate,nope")
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == [
-        "clothsim: error: --commands: unknown command 'nope' (expected some of: simulate, render, sphere, grid, xpbd)"]
+        "clothsim: error: --commands: unknown command 'nope' (expected some of: simulate, render, sphere, grid, xpbd, mesh)"]
 
 _CACHE_PROBE = """
 import numpy as np
