@@ -262,3 +262,32 @@ def test_a_runs_resolved_scene_keeps_its_meshes_and_loads_from_anywhere(tmp_path
     assert (a.translate, a.rotation, a.scale, a.friction, a.closed) == (b.translate, b.rotation, b.scale, b.friction,
                                                                        b.closed)
     assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.triangles, b.triangles)
+
+
+def test_the_pass_by_pass_profile_gives_the_same_bits_with_a_moving_mesh(tmp_path):
+    from clothsim.sim.profile import Profiler
+
+    motion = {"keyframes": [[0.0, [0.5, 0.6, 0.5]], [0.3, [0.5, 0.9, 0.5]]]}
+    path = _scene(tmp_path, box_obj(0.12, 0.12, 0.12), {"path": "shape.obj", "translate": [0.5, 0.6, 0.5],
+                                                        "friction": 0.4, "motion": motion})
+    plain, profiled = Simulation(load_scene(path)), Simulation(load_scene(path))
+    plain.step(40)
+    profiler = Profiler(profiled)
+    for _ in range(40):
+        profiler.frame()
+    assert profiled.time == plain.time
+    assert plain.positions.tobytes() == profiled.positions.tobytes()
+    assert plain.positions[:, 1].max() > 1.0  # the box did lift the cloth
+
+
+def test_motion_moves_the_translation_and_holds_off_rest(tmp_path):
+    path = _scene(tmp_path, box_obj(), {"path": "shape.obj", "translate": [1, 2, 3], "friction": 0,
+                                        "motion": {"velocity": [0.5, 0, -1]}})
+    scene = load_scene(path)
+    assert scene.meshes[0].track().at(2.0).tolist() == [2.0, 2.0, 1.0]
+    assert Simulation(scene).colliders_still_after == float("inf")
+    keyed = load_scene(_scene(tmp_path, box_obj(), {"path": "shape.obj", "friction": 0,
+                                                    "motion": {"keyframes": [[0.5, [0, 0, 0]], [1.25, [0, 1, 0]]]}}))
+    assert Simulation(keyed).colliders_still_after == 1.25
+    static = load_scene(_scene(tmp_path, box_obj(), {"path": "shape.obj", "translate": [1, 2, 3], "friction": 0}))
+    assert static.meshes[0].track().at(7.0).tolist() == [1.0, 2.0, 3.0]

@@ -267,7 +267,10 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         # skipping stays exact.
         margin = 0.0 if not self_on else col.self_margin
         cols = np.empty((2, 64))
-        mesh_on = mesh_flags(mesh)
+        # (tested here, not inside the callees, so that a scene without meshes compiles none of them)
+        mesh_on = sphere_on
+        if mesh is not None:
+            mesh_on = mesh_flags(mesh)
     if pins is not None:
         offset = np.empty(3)
     gen = np.int64(0)
@@ -374,7 +377,8 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     merge_bounds(col.boxes, 0.0, box)
                 skipped = reach_colliders(box, col, sphere_on, plane_on, capsule_on, cuboid_on, mov, col.capsules,
                                           col.cuboids)
-                skipped += reachable_meshes(mesh, box, substep, mesh_on)
+                if mesh is not None:
+                    skipped += reachable_meshes(mesh, box, substep, mesh_on)
                 if member == 0:
                     st.skips[0] += skipped
                 for c in range(lo, hi):

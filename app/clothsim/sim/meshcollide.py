@@ -258,6 +258,15 @@ def point_contact(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: floa
 
 
 @njit(**EXACT)
+def substep_times(mesh: tuple, step: int) -> tuple[float, float]:
+    """Start and end time of substep ``step`` of the current call: clock = (base time, substep
+    length, substeps since the base), so the time of a substep is the same whichever way the
+    substeps were grouped into calls (frames, single substeps, passes)."""
+    n = mesh.clock[2] + step
+    return mesh.clock[0] + n * mesh.clock[1], mesh.clock[0] + (n + 1.0) * mesh.clock[1]
+
+
+@njit(**EXACT)
 def mesh_shift(mesh: tuple, m: int, t: float, out: np.ndarray) -> None:
     """Mesh ``m``'s translation at time ``t`` into ``out`` (3,)."""
     k0, k1 = mesh.dims[m, DIMS_K0], mesh.dims[m, DIMS_K1]
@@ -299,11 +308,11 @@ def reachable_meshes(mesh: tuple | None, box: np.ndarray, step: int, on: np.ndar
     if mesh is None:
         return 0
     skipped = 0
-    t1 = mesh.clock[0] + (step + 1) * mesh.clock[1]
+    t0, t1 = substep_times(mesh, step)
     before = np.empty(3)
     after = np.empty(3)
     for m in range(mesh.dims.shape[0]):
-        mesh_shift(mesh, m, t1 - mesh.clock[1], before)
+        mesh_shift(mesh, m, t0, before)
         mesh_shift(mesh, m, t1, after)
         hit = True
         for c in range(3):
@@ -326,12 +335,12 @@ def collide_meshes_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, me
     n = free.shape[0]
     f0, f1 = share(n, c, CHUNKS)
     part = free[f0:f1]
-    t1 = mesh.clock[0] + (step + 1) * mesh.clock[1]
+    t0, t1 = substep_times(mesh, step)
     before = np.empty(3)
     after = np.empty(3)
     for m in range(mesh.dims.shape[0]):
         if on[m]:
-            mesh_shift(mesh, m, t1 - mesh.clock[1], before)
+            mesh_shift(mesh, m, t0, before)
             mesh_shift(mesh, m, t1, after)
             collide_mesh_points(pos, last, part, mesh, m, before, after, False)
 
@@ -352,11 +361,10 @@ def mesh_targets(pos: np.ndarray, last: np.ndarray, mesh: tuple, brute: bool) ->
 @njit(**EXACT)
 def mesh_corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple | None) -> int:
     """The mesh pass of the integrators other than the spec's Verlet, one substep per call
-    (``mesh.clock[2]`` counts the substeps of the current call); returns the meshes skipped."""
+    (it advances ``mesh.clock[2]`` by one); returns the meshes skipped."""
     if mesh is None:
         return 0
-    step = int(mesh.clock[2])
-    mesh.clock[2] += 1.0
+    step = 0
     box = np.empty(6)
     for c in range(3):
         box[c] = min(pos[c].min(), last[c].min())
@@ -365,4 +373,5 @@ def mesh_corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: 
     skipped = reachable_meshes(mesh, box, step, on)
     for c in range(CHUNKS):
         collide_meshes_chunk(pos, last, free, mesh, on, step, c)
+    mesh.clock[2] += 1.0
     return skipped

@@ -46,7 +46,7 @@ class MeshGroup(NamedTuple):
     times: np.ndarray  # (K,) every mesh's keyframe times, mesh after mesh
     points: np.ndarray  # (K, 3) translations at those times
     velocity: np.ndarray  # (M, 3) translation velocity after the last keyframe
-    clock: np.ndarray  # (3,) time at the start of the kernel call, substep length, substeps done (other integrators)
+    clock: np.ndarray  # (3,) base time, substep length, substeps from the base to this call's start
     thickness: float
     #: address of the mesh pass compiled for this group (see :func:`clothsim.sim.frame.kernel_addresses`); 0 until known
     collide: int = 0

@@ -317,10 +317,10 @@ class Simulation:
         if self._motion is not None:
             self._motion.clock[0] = self.time
             self._motion.clock[1] = self.dt
-        if self._meshes is not None:
-            self._meshes.clock[0] = self.time
-            self._meshes.clock[1] = self.dt
-            self._meshes.clock[2] = 0.0
+        if self._meshes is not None:  # the same (base, dt, substeps since) as wind and pins: exact
+            self._meshes.clock[0] = self._clock[0]
+            self._meshes.clock[1] = self._clock_dt
+            self._meshes.clock[2] = self._clock[1]
 
     # ------------------------------------------------------------------------------------------
     # Stepping
