@@ -170,8 +170,8 @@ def plane_mesh(point: tuple[float, float, float], normal: tuple[float, float, fl
 def _frame_of(axis: np.ndarray) -> np.ndarray:
     """A rotation (3, 3) whose second column is the unit vector ``axis`` (x and z columns any
     right-handed completion)."""
-    helper = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
-    x = np.cross(axis, helper)
+    across = np.array([1.0, 0.0, 0.0]) if abs(axis[0]) < 0.9 else np.array([0.0, 0.0, 1.0])
+    x = np.cross(axis, across)
     x /= np.linalg.norm(x)
     z = np.cross(x, axis)
     return np.stack([x, axis, z], axis=1)
