@@ -327,3 +327,12 @@ def test_profiled_run_gives_the_same_bits_and_names_skipped_passes():
     skipped = Profiler(run(curtain(), 0)).skipped()
     assert skipped["wind"] == "scene has no wind (or only still air)"
     assert skipped["moving pins"] == "cloth has no pin_motion"
+
+
+def test_implicit_euler_sees_the_moving_pins_velocity():
+    # its stiffness term K v0 uses every point's velocity, the pins' too
+    data = curtain(integrator="implicit_euler", nw=6, nh=6)
+    data["cloth"]["pin_motion"] = {"velocity": [0.4, 0.0, -0.3]}
+    sim = run(data, 2)
+    vel = sim.integrator_state.vel[:, sim.pinned]
+    np.testing.assert_allclose(vel.T, np.tile([0.4, 0.0, -0.3], (6, 1)), atol=1e-9)

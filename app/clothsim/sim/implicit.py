@@ -17,7 +17,7 @@ from .explicit import velocities_from_positions
 from .aero import add_wind
 from .forces import accumulate_forces
 from .passes import corrections
-from .pinmotion import move_pins, substep_time
+from .pinmotion import move_pins, pin_velocities, substep_time
 
 # Relative residual at which CG stops, and its iteration cap (a stiff run hitting the cap is
 # still damped, not unstable: the partial solve is a descent step of the SPD system).
@@ -189,6 +189,7 @@ def run_implicit(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray,
                                  c, keep_after, tol, max_iter)
         if pins is not None:
             move_pins(pos, last, pins, substep_time(pins.clock, substep + 1, pins.dt), offset)
+            pin_velocities(pos, last, vel, pins, dt)
         corrections(pos, last, free, blocks, rest, nw, post, substep)
         if fix_velocity:
             velocities_from_positions(pos, last, vel, free, dt)

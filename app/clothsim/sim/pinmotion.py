@@ -41,6 +41,17 @@ def move_pins(pos: np.ndarray, last: np.ndarray, pm: tuple, t: float, offset: np
         pin_chunk(pos, last, pm, offset, c)
 
 
+@njit(**KERNEL)
+def pin_velocities(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, pm: tuple, dt: float) -> None:
+    """vel = (x - x_last) / dt for the pinned points (a velocity-based integrator's stiffness term
+    sees the moving pins' true velocity)."""
+    inv = 1.0 / dt
+    for k in range(pm.pins.shape[0]):
+        q = pm.pins[k]
+        for ax in range(3):
+            vel[ax, q] = (pos[ax, q] - last[ax, q]) * inv
+
+
 @njit(**IEEE)
 def substep_time(clock: np.ndarray, step: int, dt: float) -> float:
     """Time (s) at the start of substep ``step`` of a call: clock = (base time, substeps since)."""
