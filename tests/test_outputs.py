@@ -319,6 +319,7 @@ def _interrupt_when(cwd: Path, out: str, started) -> subprocess.CompletedProcess
     """
     env = dict(os.environ)
     env.pop("DISPLAY", None)
+    env["PYTHONFAULTHANDLER"] = "1"  # a render that hangs instead of stopping shows where, on SIGABRT
     p = subprocess.Popen([sys.executable, "-m", "clothsim", "render", "pinned2", "--no-rest", "--frames", "1000000",
                           "--every", "1", "--size", "64x64", "-o", out], cwd=cwd, env=env, text=True,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
@@ -330,7 +331,12 @@ def _interrupt_when(cwd: Path, out: str, started) -> subprocess.CompletedProcess
             time.sleep(0.05)
         time.sleep(0.3)
         os.killpg(p.pid, signal.SIGINT)
-        stdout, stderr = p.communicate(timeout=60)
+        try:
+            stdout, stderr = p.communicate(timeout=60)
+        except subprocess.TimeoutExpired:
+            p.send_signal(signal.SIGABRT)  # faulthandler prints every thread's stack
+            _, stderr = p.communicate(timeout=30)
+            raise AssertionError(f"the render did not stop within 60 s of Ctrl-C; its threads:\n{stderr}") from None
     finally:
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
