@@ -9,6 +9,7 @@ CLI runs in a subprocess through ``run_cli``. Datasets are compared bit for bit 
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import signal
 import subprocess
@@ -350,6 +351,8 @@ def test_api_and_local_dask_cluster_give_identical_arrays(tmp_path: Path, scene_
     local = clothsim.sweep(scene_file, grid, tmp_path / "local", frames=4, every=2, workers=2)
     assert [r["status"] for r in local] == ["done"] * 4
     assert [r["id"] for r in local] == [f"run_{i:05d}" for i in range(4)]
+    # The workers are ended once every result is in, and reaped: none is left running.
+    assert multiprocessing.active_children() == []
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
                                   dashboard_address=None) as cluster:
         remote = clothsim.sweep(scene_file, grid, tmp_path / "dask", frames=4, every=2,

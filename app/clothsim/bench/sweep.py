@@ -35,7 +35,9 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
                                          "loop over the API and as a sweep dataset with 1 and with 2 local worker "
                                          "processes, each timed from a fresh process to its exit.")
     p.add_argument("scene", nargs="?", default="selfCollision", help="scene (default: selfCollision, 50x50)")
-    p.add_argument("--runs", type=int, default=8, metavar="N", help="runs per variant (default 8)")
+    p.add_argument("--runs", type=int, default=16, metavar="N",
+                   help="runs per variant (default 16, a 4 x 4 grid; each variant pays its start-up, "
+                        "about 1-1.5 s, once, so fewer runs weigh it more)")
     p.add_argument("--frames", type=int, default=300, metavar="F",
                    help="frames per run (default 300: a course run's fall to rest)")
     p.add_argument("--workers", default="1,2", metavar="LIST", help="worker counts to time (default 1,2)")

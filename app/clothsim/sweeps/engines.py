@@ -115,9 +115,18 @@ def open_executor(workers: int | None = None, scheduler: str | None = None) -> I
         yield executor
     except BaseException:
         # Interrupted or failed: stop the workers now rather than wait for their runs to end.
-        for process in list((getattr(executor, "_processes", None) or {}).values()):
-            with contextlib.suppress(Exception):
-                process.kill()
+        _stop_workers(executor, signal.SIGKILL)
         executor.shutdown(wait=False, cancel_futures=True)
         raise
+    # Every result is in and a worker keeps nothing worth saving (it writes no file), so it is
+    # ended here instead of tearing down its interpreter: a spawned worker's exit unloads
+    # Numba and the kernels, 0.2-0.35 s that the sweep would otherwise wait for at its end.
+    if not any(item is not None for item in getattr(executor, "_pending_work_items", {}).values()):
+        _stop_workers(executor, signal.SIGTERM)
     executor.shutdown(wait=True)
+
+
+def _stop_workers(executor: ProcessPoolExecutor, how: signal.Signals) -> None:
+    for process in list((getattr(executor, "_processes", None) or {}).values()):
+        with contextlib.suppress(Exception):
+            os.kill(process.pid, how)
