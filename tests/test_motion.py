@@ -52,6 +52,14 @@ def test_compiled_evaluation_matches_python_bit_for_bit():
     ({"keyframes": [[0, [0, "nan", 0]]]}, "sphere.motion.keyframes[0][1][1]:"),
     ({"keyframes": [0.0]}, "sphere.motion.keyframes[0]: expected a keyframe [time, [x, y, z]]"),
     ({"velocity": [float("nan"), 0, 0]}, "sphere.motion.velocity[0]:"),
+    ({"velocity": [0, -1001, 0]}, "sphere.motion.velocity[1]: must be >= -1000, got -1001"),
+    ({"velocity": [1e300, 0, 0]}, "sphere.motion.velocity[0]: must be <= 1000"),
+    ({"keyframes": [[0, [0, 0, 0]], [1, [0, 0, 2e6]]]}, "sphere.motion.keyframes[1][1][2]: must be <= 1e+06"),
+    # 1 m in 1e-300 s: a speed whose quotient would overflow, refused without computing it
+    ({"keyframes": [[0, [0, 0, 0]], [1e-300, [1, 0, 0]]]},
+     "sphere.motion.keyframes[1]: moves 1 m in 1e-300 s after the keyframe before it, faster than 1000 m/s"),
+    ({"keyframes": [[0, [0, 0, 0]], [1, [0, 0, 0]], [1.5, [300, 400, 1]]]},
+     "sphere.motion.keyframes[2]: moves 500.001 m in 0.5 s"),
     ([1, 2], "sphere.motion: expected an object"),
 ])
 def test_bad_motion_names_the_field(value, message):
@@ -59,3 +67,9 @@ def test_bad_motion_names_the_field(value, message):
         MOTION(value, AT)
     assert message in str(info.value), str(info.value)
     assert str(info.value).startswith("s.json: sphere.motion")
+
+
+def test_motion_at_the_speed_limit_is_accepted():
+    assert MOTION({"velocity": [1000, -1000, 0]}, AT).velocity == (1000.0, -1000.0, 0.0)
+    spec = MOTION({"keyframes": [[0, [0, 0, 0]], [0.5, [300, 400, 0]]]}, AT)  # 500 m in 0.5 s
+    assert spec.track().at(0.25).tolist() == [150.0, 200.0, 0.0]

@@ -13,6 +13,7 @@ continuing after the last keyframe (zero for keyframes, the given one for the ve
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,6 +23,12 @@ from . import validate as V
 
 #: Most keyframes one track may hold: a scene file, not a motion-capture stream.
 MAX_KEYFRAMES = 100_000
+#: Fastest a prescribed motion may move, in m/s (a collider or the pins; the wind has the same bound):
+#: beyond it a substep of the course's 1/2700 s moves further than a cloth is wide, and a speed near the
+#: float range overflows the blow-up guard's energy bound into a misleading "blew up" message.
+MAX_SPEED = 1e3
+#: Largest keyframe offset, in m: the scene's length bound.
+MAX_OFFSET = 1e6
 
 
 @dataclass(frozen=True)
@@ -91,23 +98,31 @@ def _keyframe(value: Any, at: V.At) -> tuple[float, tuple[float, float, float]]:
     items = V.items_of(value)
     if items is None or len(items) != 2:
         raise at.fail(f"expected a keyframe [time, [x, y, z]], got {V.shown(value)}")
-    return V.number(ge=0.0)(items[0], at.index(0)), V.vec3()(items[1], at.index(1))
+    return V.number(ge=0.0)(items[0], at.index(0)), _OFFSET(items[1], at.index(1))
 
 
 def _increasing(frames: tuple, at: V.At) -> tuple:
     if len(frames) > MAX_KEYFRAMES:
         raise at.fail(f"has {len(frames)} keyframes, at most {MAX_KEYFRAMES} are allowed")
     for i in range(1, len(frames)):
-        if not frames[i][0] > frames[i - 1][0]:
-            raise at.index(i).index(0).fail(
-                f"keyframe times must increase: {V.shown(frames[i][0])} follows {V.shown(frames[i - 1][0])}")
+        (t0, p0), (t1, p1) = frames[i - 1], frames[i]
+        if not t1 > t0:
+            raise at.index(i).index(0).fail(f"keyframe times must increase: {V.shown(t1)} follows {V.shown(t0)}")
+        distance = math.dist(p0, p1)
+        if distance > MAX_SPEED * (t1 - t0):  # a product: the quotient overflows for times 1e-300 apart
+            raise at.index(i).fail(
+                f"moves {distance:.6g} m in {t1 - t0:.6g} s after the keyframe before it, faster than "
+                f"{MAX_SPEED:g} m/s")
     return frames
+
+
+_OFFSET = V.vec3(V.number(ge=-MAX_OFFSET, le=MAX_OFFSET))
 
 
 _FIELDS = V.record({
     "keyframes": V.optional(V.then(V.list_of(_keyframe, nonempty=True, what="keyframes [time, [x, y, z]]"),
                                    _increasing)),
-    "velocity": V.optional(V.vec3()),
+    "velocity": V.optional(V.vec3(V.number(ge=-MAX_SPEED, le=MAX_SPEED))),
 })
 
 
