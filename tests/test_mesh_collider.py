@@ -251,6 +251,39 @@ def test_export_writes_the_mesh_where_it_is(tmp_path):
     np.testing.assert_allclose(corners, np.broadcast_to(half, corners.shape), rtol=1e-6)
 
 
+def test_export_animates_a_moving_mesh(tmp_path):
+    import clothsim
+
+    # keyframes that do not start at translate: at time 0 the mesh is already 0.1 m above it
+    center, half = (0.5, 0.5, 0.5), (0.15, 0.1, 0.2)
+    motion = {"keyframes": [[0.0, [0.5, 0.6, 0.5]], [1.0, [0.5, 0.6, 1.5]]]}
+    path = _scene(tmp_path, box_obj(*half), {"path": "shape.obj", "translate": list(center), "friction": 0.3,
+                                             "motion": motion})
+    track = load_scene(path).meshes[0].track()
+    offsets = {f: track.at(f / 90.0) - np.asarray(center) for f in (0, 9, 18)}
+
+    pxr = pytest.importorskip("pxr")
+    clothsim.export(path, str(tmp_path / "m.usda"), frames=18, every=9)
+    stage = pxr.Usd.Stage.Open(str(tmp_path / "m.usda"))
+    mesh = pxr.UsdGeom.Mesh(stage.GetPrimAtPath("/World/colliders/mesh_0"))
+    corners = np.abs(np.array(mesh.GetPointsAttr().Get(), dtype=np.float64) - center)  # at the scene pose
+    np.testing.assert_allclose(corners, np.broadcast_to(half, corners.shape), rtol=1e-6)
+    (op,) = mesh.GetOrderedXformOps()
+    for frame, offset in offsets.items():
+        np.testing.assert_allclose(np.array(op.Get(pxr.Usd.TimeCode(frame))), offset, atol=1e-12)
+    assert offsets[18][2] == pytest.approx(0.2)  # it moved along z
+
+    clothsim.export(path, tmp_path / "seq", frames=18, every=9)
+    assert not (tmp_path / "seq" / "colliders.obj").exists()  # the only collider moves
+    for frame, offset in offsets.items():
+        text = (tmp_path / "seq" / f"cloth_{frame:05d}.obj").read_text()
+        part = text.split("o mesh_0\n")[1]
+        points = np.array([[float(c) for c in line.split()[1:4]] for line in part.splitlines()
+                           if line.startswith("v ")])
+        corners = np.abs(points - (np.asarray(center) + offset))
+        np.testing.assert_allclose(corners, np.broadcast_to(half, corners.shape), rtol=1e-5, atol=1e-6)
+
+
 def test_a_runs_resolved_scene_keeps_its_meshes_and_loads_from_anywhere(tmp_path):
     from clothsim.scene import scene_from_dict
     from clothsim.sweeps.params import scene_json

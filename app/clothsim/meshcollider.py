@@ -66,6 +66,11 @@ class MeshSpec:
         """Vertices scaled and rotated, before the translation: (V, 3) float64."""
         return (self.vertices * self.scale) @ self.rotation_matrix().T
 
+    @property
+    def anchor(self) -> tuple[float, float, float]:
+        """The position a ``motion`` keyframe gives: the translation."""
+        return self.translate
+
     def track(self) -> Track:
         """The translation over time (a held keyframe at ``translate`` when the mesh does not move)."""
         if self.motion is None:

@@ -124,15 +124,16 @@ def _boxes(scene: Scene) -> Iterator[Collider]:
 
 
 def _meshes(scene: Scene) -> Iterator[Collider]:
-    # Written where the mesh is at time 0 (a moving mesh's later translations are not exported).
     from ..render.meshcollider import mesh_collider_vertices
 
     for k, spec in enumerate(scene.meshes):
         verts, idx = mesh_collider_vertices(spec)
-        points = (verts[:, 0:3].astype(np.float64) + spec.track().at(0.0)).astype(np.float32)
+        # At its scene pose (``translate``), like every other collider; a moving one is shifted
+        # from there by its track at each exported frame.
+        points = (verts[:, 0:3].astype(np.float64) + np.asarray(spec.translate, dtype=np.float64)).astype(np.float32)
         mesh = MeshData(points=points, normals=np.ascontiguousarray(verts[:, 3:6]),
                         uvs=np.ascontiguousarray(verts[:, 9:11]), faces=idx.astype(np.int64).reshape(-1, 3))
-        yield Collider(f"mesh_{k}", mesh)
+        yield Collider(f"mesh_{k}", mesh, moving=spec if spec.motion is not None else None)
 
 
 #: One function per kind of collider, in the order they are written.

@@ -8,9 +8,9 @@ Layout of the stage (default prim ``/World``, Y up, 1 metre per unit, time code 
                               at every exported frame, primvars:st (per vertex)
     /World/colliders/sphere_0 Sphere: radius, xformOp:translate, extent
     /World/colliders/plane_0  Mesh: one large quad
-    /World/colliders/capsule_0, box_0   Mesh: triangles
+    /World/colliders/capsule_0, box_0, mesh_0   Mesh: triangles
     a moving collider: xformOp:translate time-sampled at every exported frame (a sphere's
-    translate is its origin; a mesh's is its offset from the pose its points are written in)
+    translate is its origin; a mesh's is its offset from the scene pose its points are written in)
 
 The stage is built in memory and exported once at the end to the atomic output's temporary
 file; ``.usd`` is written in the binary crate format, as usd-core does by default.
