@@ -41,13 +41,3 @@ def error_line(r: subprocess.CompletedProcess) -> str:
 @pytest.fixture
 def cli():
     return run_cli
-
-
-# `clothsim compile` fills the package's kernel cache with every plan; run first, every later test
-# loads its kernels instead of compiling its own plan (on a fresh install the suite otherwise
-# compiled many of them twice: once in the test that first used a plan, once in this one).
-FIRST = "test_compiling.py::test_compile_compiles_everything_ahead_of_time"
-
-
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    items.sort(key=lambda item: not item.nodeid.endswith(FIRST))  # stable: the rest keep their order
