@@ -121,7 +121,7 @@ def open_executor(workers: int | None = None, scheduler: str | None = None) -> I
     # Every result is in and a worker keeps nothing worth saving (it writes no file), so it is
     # ended here instead of tearing down its interpreter: a spawned worker's exit unloads
     # Numba and the kernels, 0.2-0.35 s that the sweep would otherwise wait for at its end.
-    if not any(item is not None for item in getattr(executor, "_pending_work_items", {}).values()):
+    if not getattr(executor, "_pending_work_items", None):
         _stop_workers(executor, signal.SIGTERM)
     executor.shutdown(wait=True)
 
