@@ -24,7 +24,7 @@ import pytest
 from clothsim.scene import bundled_scene_names
 from PIL import Image
 
-from clothsim.serve.app import MAX_UPLOAD_BYTES
+from clothsim.serve.app import MAX_SCENE_BYTES
 
 pytest.importorskip("aiohttp", reason="the serve tests need the 'serve' extra (aiohttp)")
 import aiohttp  # noqa: E402
@@ -219,13 +219,13 @@ def test_uploads_are_parsed_in_memory_and_a_bad_one_leaves_the_simulation_runnin
         (b"\xff", "s.json", "s.json: cannot read scene file: not UTF-8 text (invalid start byte at byte 0)"),
         (json.dumps({"cloth": json.loads((SCENES / "pinned2.json").read_text())["cloth"],
                      "render": {"textures": {"color": "/etc/hostname"}}}).encode(), "t.json",
-         "t.json: render.textures: an uploaded scene cannot name image files (the server reads no files); "
-         "remove it to use the built-in textures"),
+         't.json: render.textures.color: "/etc/hostname": an uploaded scene may name only the image files '
+         "uploaded with it (uploaded: none) (none is bundled); the server opens no other file"),
     ):
         status, body, _ = _http(url + name, text)
         assert (status, json.loads(body)) == (400, {"error": message})
-    status, body, _ = _http(url + "big.json", b" " * (MAX_UPLOAD_BYTES + 1))
-    assert status == 413 and json.loads(body)["error"].startswith("upload: the scene file is larger than")
+    status, body, _ = _http(url + "big.json", b" " * (MAX_SCENE_BYTES + 1))
+    assert (status, json.loads(body)) == (413, {"error": "upload: the scene file is larger than 1 MiB"})
     assert engine.simulation is sim_before
 
     monkeypatch.setattr("builtins.open", spy)

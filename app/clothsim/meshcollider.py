@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import os
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -175,8 +176,10 @@ def MESH(value: Any, at: V.At) -> MeshSpec:  # noqa: N802 - a rule, named like t
     fields = _FIELDS(value, at)
     here = at.key("path")
     path = fields["path"]
-    file = _base_dir(at.source) / path
+    file = _base_dir(at.source) / path if here.files is None else here.files.locate(path, here, "OBJ")
     try:
+        if not stat.S_ISREG(os.stat(file).st_mode):  # a FIFO or a device would block the read or never end
+            raise here.fail(f"{path}: not a regular file")
         obj = read_obj(str(file))
         triangles, closed = check_topology(obj.vertices, obj.triangles, obj.lines)
     except FileNotFoundError:

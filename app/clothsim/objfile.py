@@ -14,6 +14,7 @@ prefixes it with the scene file and field.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +22,7 @@ import numpy as np
 _IGNORED = frozenset(("vt", "vn", "vp", "o", "g", "s", "mtllib", "usemtl"))
 #: Largest OBJ read (bytes): a collider, not a scanned statue; the grid and the checks are O(T).
 MAX_BYTES = 64 * 2**20
+_KEYWORD = re.compile(r"[a-z_]{1,12}")
 
 
 class ObjError(ValueError):
@@ -96,7 +98,10 @@ def parse_obj(text: str) -> ObjMesh:
         elif key in _IGNORED:
             continue
         else:
-            raise ObjError(number, f"unsupported statement {key[:40]!r} (read: v, f; ignored: "
+            # Named only when it looks like an OBJ keyword: a file that is not OBJ at all (a
+            # mistyped path to some other file) must not have its content quoted back.
+            what = f"statement {key!r}" if _KEYWORD.fullmatch(key) else "line: it does not start with an OBJ keyword"
+            raise ObjError(number, f"unsupported {what} (read: v, f; ignored: "
                                    f"{', '.join(sorted(_IGNORED))}, comments)")
     if not tris:
         raise ObjError(0, f"empty mesh: no faces ({len(vertices)} vertices)")

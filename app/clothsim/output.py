@@ -152,6 +152,10 @@ class _DirSink(_Sink):
         self.count += 1
 
 
+# A GIF frame's delay is a 16-bit count of 1/100 s.
+_GIF_MAX_DELAY_MS = 65535 * 10
+
+
 class _GifSink(_Sink):
     """An animated GIF written frame by frame as the frames arrive.
 
@@ -201,14 +205,24 @@ class _GifSink(_Sink):
         if self.pending is None:
             return
         image, box = self.pending
+        first = min(self.pending_ms, _GIF_MAX_DELAY_MS)
         if box is None:
-            chunks, _ = GifImagePlugin.getheader(image, info={"loop": 0, "duration": self.pending_ms})
-            chunks += GifImagePlugin.getdata(image, (0, 0), duration=self.pending_ms, disposal=1)
+            chunks, _ = GifImagePlugin.getheader(image, info={"loop": 0, "duration": first})
+            chunks += GifImagePlugin.getdata(image, (0, 0), duration=first, disposal=1)
+            corner = (0, 0)
         else:
             if box != (0, 0, *image.size):
                 image = image.crop(box)
-            chunks = GifImagePlugin.getdata(image, box[:2], duration=self.pending_ms, disposal=1,
+            chunks = GifImagePlugin.getdata(image, box[:2], duration=first, disposal=1,
                                             include_color_table=True)
+            corner = box[:2]
+        # A delay longer than the format holds goes on in frames of one unchanged pixel.
+        rest = self.pending_ms - first
+        while rest > 0:
+            part = min(rest, _GIF_MAX_DELAY_MS)
+            chunks += GifImagePlugin.getdata(image.crop((0, 0, 1, 1)), corner, duration=part, disposal=1,
+                                             include_color_table=True)
+            rest -= part
         with os_errors(self.label):  # flushed so that a full disk shows at this frame, not at the end
             self.file.writelines(chunks)
             self.file.flush()

@@ -248,8 +248,12 @@ def load_scene(path: str | os.PathLike[str]) -> Scene:
     return parse_scene(text, str(p))
 
 
-def parse_scene(text: str, path: str = "<scene>") -> Scene:
-    """Parse scene JSON text; ``path`` is used in error messages."""
+def parse_scene(text: str, path: str = "<scene>", files: Any = None) -> Scene:
+    """Parse scene JSON text; ``path`` is used in error messages.
+
+    The files the scene names (meshes) are read beside ``path``, or, with ``files`` (an
+    uploaded scene's :class:`~clothsim.assets.UploadedFiles`), only through it.
+    """
     if not text.strip():
         raise SceneError(path, "", "file is empty (expected a JSON object)")
     try:
@@ -260,14 +264,14 @@ def parse_scene(text: str, path: str = "<scene>") -> Scene:
         raise SceneError(path, "", "not valid JSON: nested too deeply") from None
     except ValueError as exc:  # e.g. an integer of more than 4300 digits
         raise SceneError(path, "", f"not valid JSON: {exc}") from None
-    return scene_from_dict(data, path)
+    return scene_from_dict(data, path, files)
 
 
-def scene_from_dict(data: Any, path: str = "<scene>") -> Scene:
-    """Validate an already-parsed JSON value into a :class:`Scene`."""
+def scene_from_dict(data: Any, path: str = "<scene>", files: Any = None) -> Scene:
+    """Validate an already-parsed JSON value into a :class:`Scene` (``files`` as in :func:`parse_scene`)."""
     if not isinstance(data, dict):
         raise SceneError(path, "", f"top level must be a JSON object, got {V.shown(data)}")
-    values = SCENE(data, V.At(path))
+    values = SCENE(data, V.At(path, files=files))
     cloth = ClothSpec(**values["cloth"])
     _check_memory(cloth, values["simulation"], path, values["winds"])
     return Scene(cloth=cloth, spheres=values["spheres"], planes=values["planes"], capsules=values["capsules"],

@@ -32,16 +32,23 @@ class SceneWarning(UserWarning):
 
 class At:
     """Where a value came from: ``source`` (a file name, or None), its field ``path`` and a ``label``
-    that turns a field path into what the user typed (e.g. a flag); errors and warnings name both."""
+    that turns a field path into what the user typed (e.g. a flag); errors and warnings name both.
+
+    ``files`` says where the files a value names (an OBJ mesh, an image) may come from: ``None``
+    for the file system beside ``source``, else an object with ``locate(name, at, kind) -> Path``
+    (:class:`clothsim.assets.UploadedFiles`) that is the only way to a file.
+    """
 
     # A plain class, not a dataclass: generating a dataclass costs about a millisecond of import,
     # which every CLI call pays.
-    __slots__ = ("source", "path", "label")
+    __slots__ = ("source", "path", "label", "files")
 
-    def __init__(self, source: str | None = None, path: str = "", label: Callable[[str], str] | None = None) -> None:
+    def __init__(self, source: str | None = None, path: str = "", label: Callable[[str], str] | None = None,
+                 files: Any = None) -> None:
         self.source = source
         self.path = path
         self.label = label
+        self.files = files
 
     def __repr__(self) -> str:
         return f"At({self.source!r}, {self.path!r})"
@@ -49,11 +56,11 @@ class At:
     def key(self, name: Any) -> "At":
         """The location of ``name`` inside this object."""
         text = _key_text(name)
-        return At(self.source, f"{self.path}.{text}" if self.path else text, self.label)
+        return At(self.source, f"{self.path}.{text}" if self.path else text, self.label, self.files)
 
     def index(self, i: int) -> "At":
         """The location of item ``i`` of this list."""
-        return At(self.source, f"{self.path}[{i}]", self.label)
+        return At(self.source, f"{self.path}[{i}]", self.label, self.files)
 
     @property
     def shown(self) -> str:

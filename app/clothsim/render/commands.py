@@ -14,6 +14,7 @@ from typing import Any
 
 from .. import validate as V
 from ..errors import ClothsimError
+from ..scene import MAX_FPS, MIN_FPS
 from .settings import SHADERS, TERMS, RenderSettings, parse_size
 
 DEFAULT_SCENE = "pinned2"
@@ -172,7 +173,7 @@ def run_render(args: argparse.Namespace) -> int:
     V.check(V.integer(ge=0), args.frames, "--frames")
     every = V.check(V.integer(ge=1), args.every, "--every") if args.every is not None else (1 if fmt == "dir" else 3)
     if args.video_fps is not None:
-        V.check(V.number(gt=0.0), args.video_fps, "--video-fps")
+        V.check(V.number(ge=MIN_FPS, le=MAX_FPS), args.video_fps, "--video-fps")
     scene = load_scene(args.scene)
     try:
         from ..commands import apply_overrides

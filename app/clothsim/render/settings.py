@@ -74,12 +74,16 @@ class RenderSettings:
     color_by_family: bool = False
 
     @classmethod
-    def from_scene(cls, scene: Scene) -> "RenderSettings":
-        """Defaults updated by the scene's ``render`` object (raises SceneError on bad values)."""
+    def from_scene(cls, scene: Scene, files: Any = None) -> "RenderSettings":
+        """Defaults updated by the scene's ``render`` object (raises SceneError on bad values).
+
+        Image paths are relative to the scene's folder; with ``files`` (an uploaded scene's
+        :class:`~clothsim.assets.UploadedFiles`) they resolve through it alone.
+        """
         if scene.render is None:
             return cls()
         base = Path(scene.path).parent if scene.path and not scene.path.startswith("<") else Path(".")
-        return replace(cls(), **_render_values(scene.render, V.At(scene.path, "render"), base))
+        return replace(cls(), **_render_values(scene.render, V.At(scene.path, "render", files=files), base))
 
     def with_overrides(self, overrides: dict[str, Any], source: str | None = None,
                        label: Callable[[str], str] | None = None) -> "RenderSettings":
@@ -162,6 +166,8 @@ def _image_file(base: Path) -> V.Rule:
     def check(value: Any, at: V.At) -> str:
         if not isinstance(value, str) or not value:
             raise at.fail(f"expected an image file path, got {V.shown(value)}")
+        if at.files is not None:
+            return str(at.files.locate(value, at, "image"))
         try:
             p = Path(value).expanduser()
             if not p.is_absolute():

@@ -1,9 +1,14 @@
 """The web server: one static page, one WebSocket per page, and three download/upload endpoints.
 
 Every request needs the server's token (``?token=...``); without it the answer is an empty 403.
+A WebSocket or an upload that a browser sends from another site's page (its ``Origin`` is not
+this server, nor one allowed with ``--allow-origin``) is refused with 403 too: the token in a
+leaked URL is not enough to drive the server from a foreign page.
+
 The routes never take a path from the request: the page is one file shipped in the package,
-scenes are picked from the bundled names, uploads are parsed in memory, and the two downloads
-(the image, the last clip) come from the engine.
+scenes are picked from the bundled names, an uploaded scene may name only the files uploaded
+with it (:mod:`clothsim.assets`), and the two downloads (the image, the last clip) come from
+the engine.
 """
 
 from __future__ import annotations
@@ -12,28 +17,36 @@ import asyncio
 import contextlib
 import hmac
 import json
+import logging
 import secrets
+import sys
 import shutil
 import tempfile
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from aiohttp import WSCloseCode, WSMsgType, web
+from aiohttp import BodyPartReader, WSCloseCode, WSMsgType, web
 
+from ..assets import base_name
 from ..errors import ClothsimError
 from ..render.settings import RenderSettings
 from ..scene import Scene
-from .engine import Engine
+from .engine import Engine, upload_label
 from .hub import Hub, Viewer
 from .protocol import error_reply, parse_message
 
-#: Largest uploaded scene (the bundled ones are 342-426 bytes; a long pinned list stays far below).
-MAX_UPLOAD_BYTES = 1 << 20
+#: Largest uploaded scene file (the bundled ones are 342-426 bytes; a long pinned list stays far below).
+MAX_SCENE_BYTES = 1 << 20
+#: Largest upload in all: the scene and the meshes and images that come with it.
+MAX_UPLOAD_BYTES = 32 << 20
+#: Most files an upload may bring beside its scene.
+MAX_UPLOAD_FILES = 16
 #: Largest WebSocket message from the page (its messages are a few dozen bytes).
 MAX_MESSAGE_BYTES = 64 << 10
-# How long stopping waits for requests in progress (a download) before closing them.
-SHUTDOWN_TIMEOUT_S = 5.0
+# How long stopping waits for requests in progress (a download) before closing them: Ctrl-C and
+# SIGTERM must end the server within about 2 s whatever it is doing.
+SHUTDOWN_TIMEOUT_S = 0.5
 HEADERS = {
     "Cache-Control": "no-store",
     "Referrer-Policy": "no-referrer",
@@ -51,6 +64,7 @@ PAGE_HEADERS = {
 TOKEN = web.AppKey("token", str)
 HUB = web.AppKey("hub", Hub)
 PAGE = web.AppKey("page", bytes)
+ORIGINS = web.AppKey("origins", frozenset)
 
 
 def page_html() -> bytes:
@@ -71,7 +85,24 @@ async def _index(request: web.Request) -> web.Response:
     return web.Response(body=request.app[PAGE], content_type="text/html", charset="utf-8", headers=PAGE_HEADERS)
 
 
-async def _socket(request: web.Request) -> web.WebSocketResponse:
+def _foreign_origin(request: web.Request) -> bool:
+    """True when a browser sent this request from a page of another site.
+
+    Browsers send ``Origin`` with every WebSocket handshake and cross-site POST; a client that
+    sends none is not a browser page and has the token, which is the credential.
+    """
+    origin = request.headers.get("Origin")
+    if origin is None:
+        return False
+    origin = origin.rstrip("/").lower()
+    own = {f"{request.scheme}://{request.host}".lower()}
+    return origin not in own and origin not in request.app[ORIGINS]
+
+
+async def _socket(request: web.Request) -> web.StreamResponse:
+    if _foreign_origin(request):
+        return web.Response(status=403, text="clothsim serve: WebSocket from a foreign origin "
+                                             "(start the server with --allow-origin for a proxy)\n")
     hub: Hub = request.app[HUB]
     engine = hub.engine
     ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, heartbeat=30.0)
@@ -118,22 +149,86 @@ def _handle(viewer: Viewer, text: str) -> None:
     future.add_done_callback(done)
 
 
+class _UploadError(Exception):
+    def __init__(self, message: str, status: int = 400) -> None:
+        super().__init__(message)
+        self.status = status
+
+
 async def _upload(request: web.Request) -> web.Response:
+    """POST /scene: a scene file as the body (``?name=`` its file name), or a multipart form with
+    the scene in a part named ``scene`` and the meshes and images it names in parts ``file``."""
     engine: Engine = request.app[HUB].engine
+    if _foreign_origin(request):
+        return _json({"error": "upload: sent from a page of another site"}, 403)
     try:
-        body = await request.read()
-    except web.HTTPRequestEntityTooLarge:
-        return _json({"error": f"upload: the scene file is larger than {MAX_UPLOAD_BYTES // 1024} KiB"}, 413)
-    try:
-        text = body.decode("utf-8")
-    except UnicodeDecodeError as exc:
-        return _json({"error": f"{request.query.get('name', 'upload')}: cannot read scene file: not UTF-8 text "
-                               f"({exc.reason} at byte {exc.start})"}, 400)
-    try:
-        label = await asyncio.wrap_future(engine.submit("upload", text=text, name=request.query.get("name")))
+        if request.content_type == "multipart/form-data":
+            name, body, files = await _read_form(request)
+        else:
+            name, body, files = request.query.get("name"), await _read_limited(request.content, MAX_SCENE_BYTES,
+                                                                              "the scene file"), {}
+        try:
+            text = body.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise _UploadError(f"{upload_label(name)}: cannot read scene file: not UTF-8 text "
+                               f"({exc.reason} at byte {exc.start})") from None
+        label = await asyncio.wrap_future(engine.submit("upload", text=text, name=name, files=files))
+    except _UploadError as exc:
+        return _json({"error": str(exc)}, exc.status)
     except ClothsimError as exc:
         return _json({"error": str(exc)}, 400)
     return _json({"ok": True, "scene": label}, 200)
+
+
+async def _read_limited(stream: Any, limit: int, what: str, bound: int | None = None) -> bytes:
+    """Read ``stream`` whole, or raise 413 once it passes ``limit`` bytes (``bound`` is the size
+    named in the message, when the limit is what is left of a larger one)."""
+    read = getattr(stream, "read_chunk", None) or stream.read  # a form part, or the request body
+    data = bytearray()
+    while True:
+        chunk = await read(1 << 16)
+        if not chunk:
+            return bytes(data)
+        data += chunk
+        if len(data) > limit:
+            raise _UploadError(f"upload: {what} is larger than {_size(limit if bound is None else bound)}", 413)
+
+
+async def _read_form(request: web.Request) -> tuple[str | None, bytes, dict[str, bytes]]:
+    """The scene part and the file parts of a multipart upload, each read within its limits."""
+    reader = await request.multipart()
+    name: str | None = None
+    scene: bytes | None = None
+    files: dict[str, bytes] = {}
+    total = 0
+    while (part := await reader.next()) is not None:
+        if not isinstance(part, BodyPartReader):
+            raise _UploadError("upload: nested multipart parts are not accepted")
+        if part.name == "scene":
+            if scene is not None:
+                raise _UploadError("upload: more than one scene part")
+            name = part.filename or request.query.get("name")
+            scene = await _read_limited(part, MAX_SCENE_BYTES, "the scene file")
+            total += len(scene)
+        elif part.name == "file":
+            label = base_name(part.filename or "")
+            if not label or not label.isprintable() or len(label) > 100:
+                raise _UploadError("upload: a file part needs a printable file name of at most 100 characters")
+            if label in files:
+                raise _UploadError(f"upload: two files named {label!r}")
+            if len(files) >= MAX_UPLOAD_FILES:
+                raise _UploadError(f"upload: more than {MAX_UPLOAD_FILES} files beside the scene")
+            files[label] = await _read_limited(part, MAX_UPLOAD_BYTES - total, "the upload", MAX_UPLOAD_BYTES)
+            total += len(files[label])
+        else:
+            raise _UploadError(f"upload: unknown form field {str(part.name)[:40]!r} (expected scene, file)")
+    if scene is None:
+        raise _UploadError("upload: no scene part (the scene file goes in a part named 'scene')")
+    return name, scene, files
+
+
+def _size(n: int) -> str:
+    return f"{n >> 20} MiB" if n >= 1 << 20 else f"{n >> 10} KiB"
 
 
 async def _image(request: web.Request) -> web.Response:
@@ -162,10 +257,11 @@ def _json(data: dict[str, Any], status: int) -> web.Response:
     return web.json_response(data, status=status, headers=HEADERS)
 
 
-def make_app(hub: Hub, token: str) -> web.Application:
-    """The aiohttp application: routes, token check and upload limit."""
+def make_app(hub: Hub, token: str, allow_origins: tuple[str, ...] = ()) -> web.Application:
+    """The aiohttp application: routes, token and origin checks, upload limits."""
     app = web.Application(middlewares=[_token_check], client_max_size=MAX_UPLOAD_BYTES)
     app[TOKEN] = token
+    app[ORIGINS] = frozenset(o.rstrip("/").lower() for o in allow_origins)
     app[HUB] = hub
     app[PAGE] = page_html()
     app.router.add_get("/", _index)
@@ -192,8 +288,9 @@ class Server:
 
     def __init__(self, scene: Scene, name: str, host: str = "127.0.0.1", port: int = 8000,
                  size: tuple[int, int] = (800, 800), samples: int = 4, token: str | None = None,
-                 settings: RenderSettings | None = None) -> None:
+                 settings: RenderSettings | None = None, allow_origins: tuple[str, ...] = ()) -> None:
         self.host, self.port = host, port
+        self.allow_origins = allow_origins
         self.token = token or secrets.token_urlsafe(24)
         self._folder = Path(tempfile.mkdtemp(prefix="clothsim-serve-"))
         self.engine = Engine(scene, name, size, samples, clip_folder=self._folder, settings=settings)
@@ -212,8 +309,9 @@ class Server:
             await loop.run_in_executor(None, self.engine.start)
             hub = Hub(self.engine, loop)
             self.engine.viewers = hub
-            self._runner = web.AppRunner(make_app(hub, self.token), access_log=None, handle_signals=False,
-                                         shutdown_timeout=SHUTDOWN_TIMEOUT_S)
+            _quiet_server_log()
+            self._runner = web.AppRunner(make_app(hub, self.token, self.allow_origins), access_log=None,
+                                         handle_signals=False, shutdown_timeout=SHUTDOWN_TIMEOUT_S)
             await self._runner.setup()
             site = web.TCPSite(self._runner, self.host, self.port)
             try:
@@ -230,9 +328,35 @@ class Server:
         return self.url
 
     async def stop(self) -> None:
-        """Close every page's connection, stop the engine and remove the clips folder."""
+        """Close every page's connection, stop the engine and remove the clips folder.
+
+        Takes at most about 2 s: a frame still being simulated is left to end with the process.
+        """
         if self._runner is not None:
             await self._runner.cleanup()
             self._runner = None
         await asyncio.get_running_loop().run_in_executor(None, self.engine.stop)
         shutil.rmtree(self._folder, ignore_errors=True)
+
+
+class _OneLine(logging.Formatter):
+    """aiohttp's server log as one line a record: a malformed request is not a crash to debug."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        line = f"clothsim serve: {record.getMessage()}"
+        if record.exc_info and record.exc_info[1] is not None:
+            exc = record.exc_info[1]
+            line += f": {type(exc).__name__}: {' '.join(str(exc).split())[:200]}"
+        return line
+
+    def formatException(self, ei: Any) -> str:  # noqa: N802 - logging's name
+        return ""
+
+
+def _quiet_server_log() -> None:
+    log = logging.getLogger("aiohttp.server")
+    if not any(isinstance(h.formatter, _OneLine) for h in log.handlers):
+        handler = logging.StreamHandler(sys.stderr)
+        handler.setFormatter(_OneLine())
+        log.addHandler(handler)
+        log.propagate = False

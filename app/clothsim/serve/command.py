@@ -36,6 +36,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--size", metavar="WxH", help="streamed image size in pixels (default: scene, else 800x800)")
     p.add_argument("--samples", type=int, metavar="N", help="multisampling samples per pixel, 0 for none (default 4)")
     p.add_argument("--shader", choices=SHADERS, help="look to start with (default: scene, else phong)")
+    p.add_argument("--allow-origin", action="append", default=[], metavar="URL",
+                   help="also accept pages served from URL (scheme://host[:port]), e.g. behind a reverse proxy; "
+                        "repeatable. By default only pages of this server may open its WebSocket or upload")
     p.set_defaults(func=run_serve)
 
 
@@ -49,6 +52,7 @@ def run_serve(args: argparse.Namespace) -> int:
 
     port = V.check(V.integer(ge=0, le=65535), args.port, "--port")
     host = _host(args.host)
+    origins = tuple(_origin(o) for o in args.allow_origin)
     scene = load_scene(args.scene)
     overrides = {k: v for k, v in (("size", args.size), ("samples", args.samples), ("shader", args.shader))
                  if v is not None}
@@ -57,7 +61,7 @@ def run_serve(args: argparse.Namespace) -> int:
     if not ipaddress.ip_address(host).is_loopback:
         print(f"clothsim: warning: --host {host} lets other machines reach the server; anyone who has the URL "
               "(its token) can drive it", file=sys.stderr)
-    return asyncio.run(_serve(scene, name, host, port, settings))
+    return asyncio.run(_serve(scene, name, host, port, settings, origins))
 
 
 def _host(text: str) -> str:
@@ -69,14 +73,32 @@ def _host(text: str) -> str:
         raise ClothsimError(f"--host: expected an IP address such as 127.0.0.1, got {V.shown(text)}") from None
 
 
-async def _serve(scene, name: str, host: str, port: int, settings: RenderSettings) -> int:  # noqa: ANN001
+def _origin(text: str) -> str:
+    """``--allow-origin``'s value as browsers write an Origin header: ``scheme://host[:port]``."""
+    from urllib.parse import urlsplit
+
+    try:
+        parts = urlsplit(text)
+        _ = parts.port  # a port that is not a number raises here
+    except ValueError:
+        parts = None
+    if (parts is None or parts.scheme not in ("http", "https") or not parts.hostname or parts.username
+            or parts.path not in ("", "/") or parts.query or parts.fragment):
+        raise ClothsimError(f"--allow-origin: expected scheme://host[:port] such as https://example.org, got "
+                            f"{V.shown(text)}")
+    return f"{parts.scheme}://{parts.netloc}".lower()
+
+
+async def _serve(scene, name: str, host: str, port: int, settings: RenderSettings,  # noqa: ANN001
+                 origins: tuple[str, ...] = ()) -> int:
     from .app import Server
 
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    server = Server(scene, name, host, port, settings.size, settings.samples, settings=settings)
+    server = Server(scene, name, host, port, settings.size, settings.samples, settings=settings,
+                    allow_origins=origins)
     url = await server.start()
     print(f"clothsim: serving {name} at {url}", flush=True)
     try:

@@ -16,9 +16,11 @@ from __future__ import annotations
 import io
 import math
 import queue
+import shutil
 import sys
+import tempfile
 import threading
-import traceback
+import time
 from concurrent.futures import Future
 from dataclasses import dataclass, replace
 from pathlib import Path, PurePosixPath
@@ -26,17 +28,23 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..errors import ClothsimError, SceneError
+from ..assets import UploadedFiles
+from ..errors import ClothsimError
 from ..render.settings import SHADERS, RenderSettings
-from ..scene import Scene, bundled_scene_names, load_scene, parse_scene
+from ..scene import Scene, bundled_scene_names, check_field, load_scene, parse_scene
 from ..sim.simulation import Simulation
-from . import protocol
+from . import limits, protocol
 from .orbit import Orbit
 from .recorder import ClipRecorder
 
 JPEG_QUALITY = 85
 # How long the worker sleeps when nothing asks it for anything; it wakes at once on a command.
 IDLE_WAIT_S = 0.5
+#: A frame whose simulation took longer than this pauses the simulation (the estimate in
+#: :mod:`.limits` keeps most frames far below; a heap of folds can cost more than it guessed).
+SLOW_FRAME_S = 1.5
+#: How long :meth:`Engine.stop` waits for the worker before leaving it to end with the process.
+STOP_WAIT_S = 1.0
 _STOP = object()
 
 
@@ -102,6 +110,8 @@ class Engine:
         self._ready = threading.Event()
         self._start_error: BaseException | None = None
         self._thread: threading.Thread | None = None
+        self._uploads: Path | None = None  # the current uploaded scene's files
+        self._upload_count = 0
 
     # -- called from other threads --------------------------------------------------------
     def start(self) -> None:
@@ -113,14 +123,22 @@ class Engine:
             self._thread.join()
             raise self._start_error
 
-    def stop(self) -> None:
-        """Stop the worker: a recording is dropped, the renderer and its context released."""
+    def stop(self, timeout: float | None = STOP_WAIT_S) -> bool:
+        """Stop the worker: a recording is dropped, the renderer and its context released.
+
+        Waits at most ``timeout`` seconds (None: for ever) for the frame in progress to end, and
+        returns whether the worker has ended; one that has not (a frame still running) ends with
+        the process, as it is a daemon thread.
+        """
         if self._thread is None:
-            return
+            return True
         self._commands.put(_STOP)
         self._wake.set()
-        self._thread.join()
+        self._thread.join(timeout)
+        if self._thread.is_alive():
+            return False
         self._thread = None
+        return True
 
     def submit(self, kind: str, **payload: Any) -> Future:
         """Queue a command (``set``, ``look``, ``scene``, ``upload``, ``snapshot``, ...) for the
@@ -157,6 +175,7 @@ class Engine:
         try:
             self._loop()
         finally:
+            self._drop_uploads()
             # Whatever was still queued behind the stop gets an answer, so that nobody waits forever.
             while True:
                 try:
@@ -187,7 +206,12 @@ class Engine:
                 continue
             advance = (self.running and self.error is None) or self._step_once
             if advance or self._dirty:
-                self._produce(advance)
+                try:
+                    self._produce(advance)
+                except Exception as exc:  # noqa: BLE001 - nothing a frame meets may end the server
+                    self._dirty = False
+                    self._say({"type": "error", "message": _line(exc)})
+                    continue
                 if self.running:
                     self._wake.set()  # go on as soon as the frame is taken
 
@@ -209,10 +233,18 @@ class Engine:
         sim = self.simulation
         if advance:
             self._step_once = False
+            started = time.perf_counter()
             try:
                 sim.step(1)
             except Exception as exc:  # noqa: BLE001 - the server goes on; the page shows why it stopped
                 self._stopped(exc)
+            took = time.perf_counter() - started
+            if took > SLOW_FRAME_S and self.running:
+                self.running = False
+                self._say({"type": "error", "message": (
+                    f"paused: a frame took {took:.1f} s to simulate, more than the server allows "
+                    f"({SLOW_FRAME_S:g} s); lower simulation_steps or load a smaller scene, then press P")})
+                self._broadcast_state()
         self._dirty = False
         try:
             image = self._render()
@@ -220,7 +252,10 @@ class Engine:
             self._say({"type": "error", "message": _line(exc)})
             return
         if self.recorder is not None:
-            self._record(image)
+            try:
+                self._record(image)
+            except Exception as exc:  # noqa: BLE001 - a failed clip is dropped; the stream goes on
+                self._drop_recording(_line(exc))
         jpeg = _encode(image, "JPEG", quality=JPEG_QUALITY)
         self._taken = False
         if self.viewers is not None:
@@ -289,6 +324,9 @@ class Engine:
         return self.state()
 
     def _do_set(self, field: str, value: Any) -> None:
+        if field == "simulation_steps":
+            steps = check_field("simulation", field, value)
+            limits.check_substeps(self.simulation.scene, steps)
         setattr(self.simulation, field, value)  # the API setter: checked, re-planned
         self._changed()
 
@@ -334,25 +372,46 @@ class Engine:
             raise ClothsimError(f"scene: no bundled scene named {name!r}")
         self._load(load_scene(name), name)
 
-    def _do_upload(self, text: str, name: str | None = None) -> str:
+    def _do_upload(self, text: str, name: str | None = None, files: dict[str, bytes] | None = None) -> str:
+        """Load an uploaded scene. The files it names (meshes, images) come from ``files`` (base
+        name -> bytes, uploaded with it) or the bundled assets, never from the server's disk."""
         label = upload_label(name)
-        scene = parse_scene(text, label)
-        if isinstance(scene.render, dict) and "textures" in scene.render:
-            raise SceneError(label, "render.textures", "an uploaded scene cannot name image files "
-                             "(the server reads no files); remove it to use the built-in textures")
-        self._load(scene, label)
+        folder = self._upload_folder()
+        try:
+            uploaded = UploadedFiles.store(folder, files or {})
+            scene = parse_scene(text, label, files=uploaded)
+            self._load(scene, label, uploaded)
+        except BaseException:
+            shutil.rmtree(folder, ignore_errors=True)
+            raise
+        self._drop_uploads()
+        self._uploads = folder
         return label
 
-    def _load(self, scene: Scene, name: str) -> None:
+    def _upload_folder(self) -> Path:
+        if self.clip_folder is None:
+            self.clip_folder = Path(tempfile.mkdtemp(prefix="clothsim-serve-"))
+        self._upload_count += 1
+        return self.clip_folder / f"upload-{self._upload_count}"
+
+    def _drop_uploads(self) -> None:
+        if self._uploads is not None:
+            shutil.rmtree(self._uploads, ignore_errors=True)
+            self._uploads = None
+
+    def _load(self, scene: Scene, name: str, files: UploadedFiles | None = None) -> None:
         # Everything that can fail is built before anything is replaced: a bad scene leaves the
-        # running simulation as it was.
-        simulation = Simulation(scene)
+        # running simulation as it was. The bounds come first, before any array is allocated.
+        limits.check_scene(scene, name)
         # A scene with a render object brings its look; otherwise the page's look stays.
-        settings = RenderSettings.from_scene(scene) if scene.render else self.settings
+        settings = RenderSettings.from_scene(scene, files) if scene.render else self.settings
+        simulation = Simulation(scene)
         self.simulation, self.settings, self.scene_name = simulation, settings, name
         self.error = None
         self.orbit = self._initial_orbit()
         self._changed()
+        if files is None:
+            self._drop_uploads()
 
     def _do_snapshot(self) -> bytes:
         return _encode(self._render(), "PNG")
@@ -377,13 +436,17 @@ class Engine:
         try:
             full = self.recorder.add(image)
         except ClothsimError as exc:
-            self.recorder.abort()
-            self.recorder = None
-            self._say({"type": "error", "message": str(exc)})
-            self._broadcast_state()
+            self._drop_recording(str(exc))
             return
         if full:
             self._finish_clip()
+
+    def _drop_recording(self, message: str) -> None:
+        if self.recorder is not None:
+            self.recorder.abort()
+            self.recorder = None
+        self._say({"type": "error", "message": message})
+        self._broadcast_state()
 
     def _finish_clip(self) -> None:
         recorder, self.recorder = self.recorder, None
@@ -413,13 +476,15 @@ def _encode(image: np.ndarray, fmt: str, **options: Any) -> bytes:
 
 
 def _line(exc: BaseException) -> str:
-    """The one line a page shows for an error; an unexpected one also goes to stderr."""
+    """The one line a page shows for an error; an unexpected one also goes to stderr, as one line."""
     if isinstance(exc, ClothsimError):
         return str(exc)
     if isinstance(exc, MemoryError):
-        return "out of memory"
-    traceback.print_exception(exc, file=sys.stderr)
-    return f"internal error: {type(exc).__name__}: {exc}"
+        line = "out of memory"
+    else:
+        line = "internal error: " + " ".join(f"{type(exc).__name__}: {exc}".split())[:300]
+    print(f"clothsim serve: {line}", file=sys.stderr, flush=True)
+    return line
 
 
 def _jsonable(value: Any) -> Any:

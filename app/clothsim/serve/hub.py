@@ -8,6 +8,7 @@ slow for) and the text messages queued for it, and tells the engine when it took
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import collections
 import json
 import struct
@@ -65,10 +66,15 @@ class Hub:
 
     # called by the engine, in its thread
     def frame(self, frame: Frame) -> None:
-        self.loop.call_soon_threadsafe(self._on_frame, frame)
+        self._call(self._on_frame, frame)
 
     def message(self, message: dict[str, Any]) -> None:
-        self.loop.call_soon_threadsafe(self.broadcast, json.dumps(message))
+        self._call(self.broadcast, json.dumps(message))
+
+    def _call(self, callback: Any, *args: Any) -> None:
+        # A frame that outlived the server (stop does not wait for a slow one) has nobody to tell.
+        with contextlib.suppress(RuntimeError):
+            self.loop.call_soon_threadsafe(callback, *args)
 
     # on the event loop
     def _on_frame(self, frame: Frame) -> None:
