@@ -2,7 +2,7 @@
 
 Skipped, with the reason, where no browser is installed; CI installs one (.ci/run). Set
 CLOTHSIM_SERVE_SCREENSHOT=path.png to keep the screenshot of the page that the last test takes
-(the README's docs/serve.png is one).
+(docs/serve.png, shown in docs/serve.md, is one).
 """
 
 from __future__ import annotations
