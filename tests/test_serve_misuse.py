@@ -228,7 +228,7 @@ def test_a_frame_slower_than_the_bound_pauses_the_simulation(server, monkeypatch
 
     async def page() -> tuple[str, dict]:
         async with aiohttp.ClientSession() as s, await _ws(server, s) as ws:
-            message = (await _next(ws, "error"))["message"]
+            message = (await _next(ws, "error"))["message"]  # after the second slow frame
             state = await _next(ws, "state")
             return message, state
     message, state = asyncio.run(page())

@@ -40,8 +40,8 @@ from .recorder import ClipRecorder
 JPEG_QUALITY = 85
 # How long the worker sleeps when nothing asks it for anything; it wakes at once on a command.
 IDLE_WAIT_S = 0.5
-#: A frame whose simulation took longer than this pauses the simulation (the estimate in
-#: :mod:`.limits` keeps most frames far below; a heap of folds can cost more than it guessed).
+#: Two frames in a row whose simulation took longer than this pause the simulation (the
+#: estimate in :mod:`.limits` keeps most frames far below; a heap of folds can cost more).
 SLOW_FRAME_S = 1.5
 #: How long :meth:`Engine.stop` waits for the worker before leaving it to end with the process.
 STOP_WAIT_S = 1.0
@@ -112,6 +112,7 @@ class Engine:
         self._thread: threading.Thread | None = None
         self._uploads: Path | None = None  # the current uploaded scene's files
         self._upload_count = 0
+        self._slow_frames = 0
 
     # -- called from other threads --------------------------------------------------------
     def start(self) -> None:
@@ -239,7 +240,11 @@ class Engine:
             except Exception as exc:  # noqa: BLE001 - the server goes on; the page shows why it stopped
                 self._stopped(exc)
             took = time.perf_counter() - started
-            if took > SLOW_FRAME_S and self.running:
+            # Two in a row: the first frame of a scene, or after a change of plan, may include
+            # compiling its kernels (seconds, once).
+            self._slow_frames = self._slow_frames + 1 if took > SLOW_FRAME_S else 0
+            if self._slow_frames >= 2 and self.running:
+                self._slow_frames = 0
                 self.running = False
                 self._say({"type": "error", "message": (
                     f"paused: a frame took {took:.1f} s to simulate, more than the server allows "
