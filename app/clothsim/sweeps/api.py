@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ..atomic import atomic_output, check_destination
+from ..atomic import atomic_output, check_destination, check_name
 from ..errors import ClothsimError
 from ..scene import Scene, load_scene, resolve_scene_path
 from ..validate import check, integer
@@ -62,6 +62,7 @@ def _output_kind(out: str | os.PathLike[str]) -> str:
     text = os.fspath(out)
     if not text:
         raise ClothsimError("-o: output path is empty")
+    check_name(text)
     p = Path(text)
     if p.suffix.lower() == ".png" and not text.endswith(("/", os.sep)):
         if p.is_dir():
@@ -144,16 +145,43 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
         "size": list(cell_size) if video else None, "shader": shader if video else None,
     }
     data: ds.Dataset | None = None
-    finished: dict[str, dict[str, Any]] = {}
     if kind == "dataset":
         data = ds.Dataset(out, definition)
-        data.check()
+        data.open()  # locked from here: close() below, however the sweep ends
+    else:
+        check_destination(out, label=os.fspath(out))
+    try:
+        records, images, lost = _run_all(runs, scenes, settings, data, out, kind, frame_list, last, every, seed,
+                                 cell_size, video, workers, scheduler, progress)
+    finally:
+        if data is not None:
+            data.close()
+    ordered = [records[r.id] for r in runs]
+    if kind == "sheet":
+        fps = scenes[runs[0].id].simulation.frames_per_sec
+        spec = S.plan(runs, space, frame_list, fps, samples is not None)
+        picture = S.compose(spec, images, cell_size)
+        from PIL import Image
+
+        with atomic_output(out, label=os.fspath(out)) as tmp:
+            Image.fromarray(picture).save(tmp, format="PNG", optimize=True)
+    if report:
+        _summary(ordered, time.perf_counter() - start, out, lost)
+    return ordered
+
+
+def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, Any], data: ds.Dataset | None,
+             out: Any, kind: str, frame_list: list[int], last: int, every: int, seed: int | None,
+             cell_size: tuple[int, int], video: bool, workers: int | None, scheduler: str | None,
+             progress: bool) -> tuple[dict[str, dict[str, Any]], dict[tuple[str, int], np.ndarray | None], int]:
+    """Run every run not finished yet; return the records by id, a contact sheet's cells, and the
+    number of runs lost with a worker."""
+    finished: dict[str, dict[str, Any]] = {}
+    if data is not None:
         if data.resumed:
             n_samples = len(sample_frames(last, every))
             expected = {r.id: {"params": json.loads(json.dumps(r.params)), "samples": n_samples} for r in runs}
             finished = data.finished(expected)
-    else:
-        check_destination(out, label=os.fspath(out))
 
     samples_msaa = {rid: s.samples for rid, s in settings.items()}
     tasks = [Task(id=r.id, scene=scenes[r.id], frames=last, every=every, positions=kind == "dataset",
@@ -205,35 +233,29 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
                     task = futures.pop(future)  # drop the result with it once written: memory stays flat
                     try:
                         result = future.result()
-                    except concurrent.futures.process.BrokenProcessPool:
-                        result = None
-                    except Exception as exc:  # noqa: BLE001 - a worker lost on a cluster, a transfer failure
-                        result = {"id": task.id, "status": "failed", "seconds": 0.0,
-                                  "error": " ".join(f"{type(exc).__name__}: {exc}".split())}
-                    if result is None:
+                    except Exception as exc:  # noqa: BLE001 - the run itself never raises (runner.run)
+                        # A local worker that died (BrokenProcessPool), a Dask worker lost with the
+                        # run (KilledWorker), a transfer that failed: the run has no result, which
+                        # is not a property of its parameters. It is not recorded, so the same
+                        # command runs it again.
                         lost += 1
                         records[task.id] = {"id": task.id, "params": by_id[task.id].params, "seed": seed,
                                             "status": "failed", "path": None, "frames": last, "seconds": 0.0,
-                                            "error": "the worker process running it died (not recorded: "
-                                                     "the same command runs it again)", "skipped": False,
-                                            "lost": True}
+                                            "error": _lost_reason(exc), "skipped": False, "lost": True}
                     else:
                         finish(result)
                     bar.update(1)
         finally:
             bar.close()
-    ordered = [records[r.id] for r in runs]
-    if kind == "sheet":
-        fps = scenes[runs[0].id].simulation.frames_per_sec
-        spec = S.plan(runs, space, frame_list, fps, samples is not None)
-        picture = S.compose(spec, images, cell_size)
-        from PIL import Image
+    return records, images, lost
 
-        with atomic_output(out, label=os.fspath(out)) as tmp:
-            Image.fromarray(picture).save(tmp, format="PNG", optimize=True)
-    if report:
-        _summary(ordered, time.perf_counter() - start, out, lost)
-    return ordered
+
+def _lost_reason(exc: BaseException) -> str:
+    if isinstance(exc, concurrent.futures.process.BrokenProcessPool):
+        why = "the worker process running it died"
+    else:
+        why = " ".join(f"{type(exc).__name__}: {exc}".split())
+    return f"{why} (not recorded: the same command runs it again)"
 
 
 def _workers_default() -> int:
