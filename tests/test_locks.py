@@ -64,9 +64,13 @@ def wait_for_holder(lock: Path, proc: subprocess.Popen, timeout: float = 60) -> 
 
 
 def kill9(proc: subprocess.Popen) -> None:
+    """End ``proc`` if still running; its pipes are closed unread (a leftover child may hold them)."""
     if proc.poll() is None:
         proc.kill()
-    proc.communicate()
+    proc.wait()
+    for pipe in (proc.stdout, proc.stderr):
+        if pipe is not None:
+            pipe.close()
 
 
 def tree(folder: Path) -> dict[str, bytes | None]:

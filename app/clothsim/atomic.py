@@ -29,10 +29,11 @@ the complete output of the last one (the lock file would also take the last bloc
 full disk, which such a writer may need).
 
 A symbolic link at the destination is followed. Nothing is created on the file system mounted
-at ``/dev``. A name longer than the file system allows is one error line, not a traceback. Whatever fails, or is interrupted, the temporary file or folder is removed, and
-so are the parent folders this module created for the output; what was there before is left
-as it was. Ctrl-C is held off only for the final renames and that cleanup. Every ``OSError``
-met on the way becomes one :class:`ClothsimError` line naming the path.
+at ``/dev``. A name longer than the file system allows is one error line, not a traceback.
+Whatever fails, or is interrupted, the temporary file or folder is removed, and so are the
+parent folders this module created for the output; what was there before is left as it was.
+Ctrl-C is held off only for the final renames and that cleanup. Every ``OSError`` met on the
+way becomes one :class:`ClothsimError` line naming the path.
 """
 
 from __future__ import annotations

@@ -91,7 +91,11 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
     Runs execute in ``workers`` local processes (default: one per core) or on the Dask cluster
     at ``scheduler``. Records have ``id``, ``params``, ``seed``, ``status`` (``done``/``failed``),
     ``error``, ``path``, ``frames``, ``seconds``, and ``skipped`` (True when an earlier sweep into
-    the same dataset had finished the run).
+    the same dataset had finished the run); a run lost with a worker that died (local or Dask) is
+    ``failed`` with ``lost`` True, is not written to the manifest, and is run by the next sweep.
+
+    A dataset folder is locked while the sweep runs: another sweep into it (or this one started
+    again) raises :class:`~clothsim.ClothsimError` naming the holder, and writes nothing.
     """
     from ..render.settings import RenderSettings, parse_size
 
@@ -273,15 +277,16 @@ def _bar(total: int, show: bool) -> Any:
 
 def _summary(records: list[dict[str, Any]], seconds: float, out: Any, lost: int) -> None:
     done = sum(1 for r in records if r["status"] == "done" and not r["skipped"])
-    failed = sum(1 for r in records if r["status"] == "failed" and not r["skipped"])
+    failed = sum(1 for r in records if r["status"] == "failed" and not r["skipped"] and not r.get("lost"))
     skipped = sum(1 for r in records if r["skipped"])
     ran = done + failed
     rate = 60.0 * ran / seconds if seconds > 0 else 0.0
-    print(f"sweep: {len(records)} runs: {done} done, {failed} failed, {skipped} skipped "
+    lost_text = f", {lost} lost" if lost else ""
+    print(f"sweep: {len(records)} runs: {done} done, {failed} failed{lost_text}, {skipped} skipped "
           f"in {seconds:.1f} s ({rate:.1f} runs/min); wrote {os.fspath(out)}", file=sys.stderr)
     for r in records:
         if r["status"] == "failed" and not r["skipped"]:
-            print(f"sweep: {r['id']} failed: {r['error']}", file=sys.stderr)
+            print(f"sweep: {r['id']} {'lost' if r.get('lost') else 'failed'}: {r['error']}", file=sys.stderr)
     if lost:
         print(f"sweep: {lost} runs were lost with a worker that died; run the same command again to finish them",
               file=sys.stderr)
