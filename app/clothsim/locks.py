@@ -66,9 +66,9 @@ def is_lock_name(name: str) -> bool:
 def beside_name(name: str) -> str:
     """The lock file's name beside an output called ``name`` (shortened to fit NAME_MAX)."""
     full = f".{name}{_SUFFIX}"
-    if len(full.encode()) <= _NAME_MAX:
+    if len(os.fsencode(full)) <= _NAME_MAX:
         return full
-    digest = hashlib.sha1(name.encode("utf-8", "surrogateescape")).hexdigest()[:16]
+    digest = hashlib.sha1(os.fsencode(name)).hexdigest()[:16]
     return f".{name[:120]}.{digest}{_SUFFIX}"
 
 
@@ -126,8 +126,10 @@ def probe(lock_file: Path, label: str) -> None:
 
     For checks made before a long computation: the writer takes the lock itself later.
     """
-    if covered(lock_file.parent if lock_file.name == LOCK_NAME else lock_file):
-        return
+    with _held_guard:
+        mine = _absolute(lock_file) in _held
+    if mine or covered(lock_file.parent if lock_file.name == LOCK_NAME else lock_file):
+        return  # never open a lock file this process holds (see the module's note on NFS)
     try:
         fd = os.open(lock_file, os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW)
     except OSError:
