@@ -18,11 +18,22 @@ sequence, passes ``owned`` to name the files it writes) is written as follows:
   then are the old frames beyond the new count deleted. A reader never sees a half-written
   frame file; while those renames run it may see new frames next to old ones.
 
+A folder output, and a file output whose writer asks for it (a USD stage: an export writes it
+for as long as it simulates), is locked while it is written (:mod:`clothsim.locks`): a folder
+that exists by ``.clothsim.lock`` inside it, anything else by a hidden lock file beside it. A
+second writer stops with one line naming the holder before it writes anything. Once the lock
+is held, temporary files and folders that a killed earlier writer of the same output left
+behind are removed (no live writer can own them: it would hold the lock). Other file outputs
+are not locked: two writers of one such file each write a temporary file, and the file ends as
+the complete output of the last one (the lock file would also take the last block of a nearly
+full disk, which such a writer may need).
+
 A symbolic link at the destination is followed. Nothing is created on the file system mounted
-at ``/dev``. Whatever fails, or is interrupted, the temporary file or folder is removed, and
-so are the parent folders this module created for the output; what was there before is left
-as it was. Ctrl-C is held off only for the final renames and that cleanup. Every ``OSError``
-met on the way becomes one :class:`ClothsimError` line naming the path.
+at ``/dev``. A name longer than the file system allows is one error line, not a traceback.
+Whatever fails, or is interrupted, the temporary file or folder is removed, and so are the
+parent folders this module created for the output; what was there before is left as it was.
+Ctrl-C is held off only for the final renames and that cleanup. Every ``OSError`` met on the
+way becomes one :class:`ClothsimError` line naming the path.
 """
 
 from __future__ import annotations
@@ -38,9 +49,15 @@ import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+from . import locks
 from .errors import ClothsimError
 
 _FRAME = re.compile(r"frame_(\d{5,})\.png")
+# mkstemp/mkdtemp's random part: eight of these characters.
+_RANDOM = "[a-z0-9_]{8}"
+_FRAMES_TMP = re.compile(rf"\.clothsim-frames\.{_RANDOM}\.tmp")
+_NAME_MAX = 255
+_PATH_MAX = 4095
 # Long destination names must still leave room for the temporary name's additions (NAME_MAX).
 _STEM_MAX = 64
 
@@ -71,6 +88,26 @@ def os_errors(label: str, doing: str = "cannot write") -> Iterator[None]:
         raise os_error(label, exc, doing) from None
 
 
+def check_name(path: str | os.PathLike[str], label: str | None = None) -> None:
+    """Raise one line if a component of ``path`` is longer than a file name may be (255 bytes).
+
+    The checks that follow (``is_dir``, ``stat``) would otherwise end in ``OSError: [Errno 36]``.
+    """
+    text = os.fspath(path)
+    label = label if label is not None else text
+    for part in text.split(os.sep):
+        size = len(os.fsencode(part))
+        if size > _NAME_MAX:
+            raise ClothsimError(f"{_shortened(label)}: name too long ({size} bytes in one file or folder name; "
+                                f"at most {_NAME_MAX})")
+    if len(os.fsencode(text)) > _PATH_MAX:
+        raise ClothsimError(f"{_shortened(label)}: path too long ({len(os.fsencode(text))} bytes; at most {_PATH_MAX})")
+
+
+def _shortened(label: str) -> str:
+    return label if len(label) <= 80 else f"{label[:40]}...{label[-20:]}"
+
+
 def check_destination(dest: str | os.PathLike[str], *, directory: bool = False,
                       label: str | None = None, owned: Callable[[str], bool] = is_frame_name) -> None:
     """Fail fast: raise :class:`ClothsimError` if ``dest`` could not be written.
@@ -82,7 +119,8 @@ def check_destination(dest: str | os.PathLike[str], *, directory: bool = False,
     :func:`atomic_output`.
     """
     label = _label(Path(dest), label)
-    _, home = _inspect(Path(dest), directory, label, owned)
+    dest, home = _inspect(Path(dest), directory, label, owned)
+    locks.probe(_lock_file(dest, home), label)
     probe_in = _nearest_existing(home)
     with os_errors(label, f"cannot write in {probe_in}"):
         fd, probe = tempfile.mkstemp(prefix=".clothsim-", suffix=".probe", dir=probe_in)
@@ -92,7 +130,8 @@ def check_destination(dest: str | os.PathLike[str], *, directory: bool = False,
 
 @contextlib.contextmanager
 def atomic_output(dest: str | os.PathLike[str], *, directory: bool = False, label: str | None = None,
-                  block_writes: bool = True, owned: Callable[[str], bool] = is_frame_name) -> Iterator[Path]:
+                  block_writes: bool = True, owned: Callable[[str], bool] = is_frame_name,
+                  lock: bool | None = None) -> Iterator[Path]:
     """Yield a temporary path for ``dest`` (a file, or a frames folder if ``directory``).
 
     If the block succeeds the temporary output is moved onto ``dest`` as the module docstring
@@ -108,14 +147,26 @@ def atomic_output(dest: str | os.PathLike[str], *, directory: bool = False, labe
     ``owned`` tells, for a folder output, the names of the files clothsim writes there (default:
     ``frame_NNNNN.png``): an existing folder holding anything else is refused, and such files
     left from an earlier run and not rewritten are deleted at the end.
+
+    ``lock`` (default: for a folder output only) locks the output for the whole block: another
+    writer holding it is one error line here, before anything is written. An output inside a
+    folder this process has locked (a sweep's dataset) is covered by that lock.
     """
+    wants_lock = directory if lock is None else lock
     label = _label(Path(dest), label)
     dest, home = _inspect(Path(dest), directory, label, owned)
     created = _make_parents(home, label)
+    held: locks.OutputLock | None = None
     try:
+        if wants_lock and not locks.covered(dest):
+            held, dest, home = _lock(dest, home, directory, label, owned)
+            with contextlib.suppress(OSError):
+                _remove_stale(dest, home, directory)
         with os_errors(label, f"cannot write in {home}"):
             tmp = _make_temporary(dest, home, directory)
     except BaseException:
+        if held is not None:
+            held.release()
         _remove_folders(created)
         raise
     try:
@@ -132,8 +183,64 @@ def atomic_output(dest: str | os.PathLike[str], *, directory: bool = False, labe
     except BaseException:
         with _no_interrupts():
             _remove(tmp)
+            if held is not None:
+                held.release()
             _remove_folders(created)
         raise
+    if held is not None:
+        held.release()
+
+
+# -- locking -------------------------------------------------------------------------------------
+def _lock_file(dest: Path, home: Path) -> Path:
+    """Where the lock of ``dest`` lives: inside an existing output folder, else beside the output."""
+    return dest / locks.LOCK_NAME if home == dest else dest.parent / locks.beside_name(dest.name)
+
+
+def _lock(dest: Path, home: Path, directory: bool, label: str,
+          owned: Callable[[str], bool]) -> tuple[locks.OutputLock, Path, Path]:
+    """Lock ``dest``; return the lock and ``dest``/``home`` as found once it is held.
+
+    A folder output that did not exist is locked beside it; if it appeared meanwhile (another
+    writer finished it), its own lock inside is taken instead and the checks run again.
+    """
+    for _ in range(3):
+        if home == dest:
+            lock = locks.lock_inside(dest, label)
+        else:
+            lock = locks.lock_beside(dest, label)
+        try:
+            found, found_home = _inspect(dest, directory, label, owned)
+        except BaseException:
+            lock.release()
+            raise
+        if found_home == home:
+            return lock, found, found_home
+        lock.release()
+        dest, home = found, found_home
+    raise ClothsimError(f"{label}: keeps changing while being locked; is another program writing it?")
+
+
+def _remove_stale(dest: Path, home: Path, directory: bool) -> None:
+    """Remove the temporary outputs of earlier writers of ``dest`` that were killed.
+
+    Called with the lock held: a live writer of this output would hold it. A destination name
+    cut short in its temporary names (over 64 characters) is skipped, since the cut names could
+    belong to another output.
+    """
+    if directory and home == dest:
+        pattern = _FRAMES_TMP
+    else:
+        stem = dest.name if directory else dest.stem
+        if len(stem) > _STEM_MAX:
+            return
+        suffix = "" if directory else dest.suffix
+        pattern = re.compile(rf"\.{re.escape(stem)}\.{_RANDOM}\.tmp{re.escape(suffix)}")
+    with os.scandir(home) as entries:
+        stale = [Path(e.path) for e in entries if pattern.fullmatch(e.name)
+                 and (e.is_dir(follow_symlinks=False) if directory else e.is_file(follow_symlinks=False))]
+    for path in stale:
+        _remove(path)
 
 
 # -- checks --------------------------------------------------------------------------------------
@@ -149,8 +256,12 @@ def _inspect(dest: Path, directory: bool, label: str,
     hold the temporary output: the destination itself for an existing frames folder, else its
     parent (which may not exist yet).
     """
-    if dest.is_symlink():
-        dest = Path(os.path.realpath(dest))
+    check_name(dest, label)
+    try:
+        if dest.is_symlink():
+            dest = Path(os.path.realpath(dest))
+    except OSError as exc:
+        raise os_error(label, exc, "cannot check") from None
     try:
         st = dest.stat()
     except FileNotFoundError:
@@ -214,11 +325,18 @@ def _file_ancestor(path: Path) -> Path:
 def _check_folder_is_ours(folder: Path, label: str, owned: Callable[[str], bool] = is_frame_name) -> None:
     with os_errors(label, "cannot read the folder"):
         with os.scandir(folder) as entries:
-            foreign = sum(1 for e in entries if not (owned(e.name) and e.is_file(follow_symlinks=False)))
+            foreign = sum(1 for e in entries if not _ours(e, owned))
     if foreign:
         files = "file" if foreign == 1 else "files"
         raise ClothsimError(f"{label}: folder is not empty ({foreign} {files} not written by clothsim); "
                             "choose another or empty it")
+
+
+def _ours(entry: os.DirEntry[str], owned: Callable[[str], bool]) -> bool:
+    """A file clothsim wrote in a frames folder: an output file, its lock, or a killed run's temporary folder."""
+    if entry.name == locks.LOCK_NAME or owned(entry.name):
+        return entry.is_file(follow_symlinks=False)
+    return _FRAMES_TMP.fullmatch(entry.name) is not None and entry.is_dir(follow_symlinks=False)
 
 
 # -- temporary output and commit -----------------------------------------------------------------

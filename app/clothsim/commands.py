@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_output, check_destination
+from .atomic import atomic_output, check_destination, check_name
 from .errors import ClothsimError
 from .scene import SIMULATION, Scene, check_memory, load_scene
 from .validate import At, check, integer
@@ -101,6 +101,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     from .sim.rest import RestDetector
 
     check(integer(ge=0), args.frames, "--frames")
+    check_name(args.out)
     out = Path(args.out)
     if out.suffix != ".npz":
         raise ClothsimError(f"--out: {out}: expected a .npz file name")

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_output, check_destination
+from ..atomic import atomic_output, check_destination, check_name
 from ..errors import ClothsimError
 from ..output import _destination
 from ..scene import Scene, load_scene
@@ -37,6 +37,7 @@ def export_format(path: str | os.PathLike[str]) -> str:
     text = os.fspath(path)
     if not text:
         raise ClothsimError("output path is empty")
+    check_name(text)
     p = Path(text)
     if text.endswith(("/", os.sep)) or not p.suffix:
         return "obj"
@@ -109,7 +110,8 @@ def _write(sim: Simulation, fmt: str, out: str | os.PathLike[str], frames: int, 
     uvs = cloth_uvs(sim.nw, sim.nh)
     normals = ClothNormals(sim.nw, sim.nh)
     shapes = colliders(scene)
-    with atomic_output(dest, directory=fmt == "obj", label=label, owned=obj.is_sequence_name) as tmp:
+    # Locked, a stage too: it is written for as long as the simulation runs.
+    with atomic_output(dest, directory=fmt == "obj", label=label, owned=obj.is_sequence_name, lock=True) as tmp:
         if fmt == "usd":
             writer: obj.ObjSequenceWriter | usd.UsdStageWriter = usd.UsdStageWriter(
                 tmp, label, faces, uvs, shapes, usd.stage_doc(Path(scene.path).name))

@@ -167,8 +167,10 @@ def _colour_arg(text: str) -> Any:
 def run_render(args: argparse.Namespace) -> int:
     """``clothsim render``: simulate, draw and write the output atomically."""
     from .. import output
+    from ..atomic import check_name
     from ..scene import load_scene
 
+    check_name(args.output)  # a name too long would end the checks below in an OSError
     fmt = output.check_output(args.output)  # fail on an output we could not write before any work
     V.check(V.integer(ge=0), args.frames, "--frames")
     every = V.check(V.integer(ge=1), args.every, "--every") if args.every is not None else (1 if fmt == "dir" else 3)

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from ..atomic import atomic_output, check_destination
+from ..atomic import atomic_output, check_destination, check_name
 from ..errors import ClothsimError
 from ..scene import Scene, load_scene, resolve_scene_path
 from ..validate import check, integer
@@ -62,6 +62,7 @@ def _output_kind(out: str | os.PathLike[str]) -> str:
     text = os.fspath(out)
     if not text:
         raise ClothsimError("-o: output path is empty")
+    check_name(text)
     p = Path(text)
     if p.suffix.lower() == ".png" and not text.endswith(("/", os.sep)):
         if p.is_dir():
@@ -90,7 +91,11 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
     Runs execute in ``workers`` local processes (default: one per core) or on the Dask cluster
     at ``scheduler``. Records have ``id``, ``params``, ``seed``, ``status`` (``done``/``failed``),
     ``error``, ``path``, ``frames``, ``seconds``, and ``skipped`` (True when an earlier sweep into
-    the same dataset had finished the run).
+    the same dataset had finished the run); a run lost with a worker that died (local or Dask) is
+    ``failed`` with ``lost`` True, is not written to the manifest, and is run by the next sweep.
+
+    A dataset folder is locked while the sweep runs: another sweep into it (or this one started
+    again) raises :class:`~clothsim.ClothsimError` naming the holder, and writes nothing.
     """
     from ..render.settings import RenderSettings, parse_size
 
@@ -144,16 +149,43 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
         "size": list(cell_size) if video else None, "shader": shader if video else None,
     }
     data: ds.Dataset | None = None
-    finished: dict[str, dict[str, Any]] = {}
     if kind == "dataset":
         data = ds.Dataset(out, definition)
-        data.check()
+        data.open()  # locked from here: close() below, however the sweep ends
+    else:
+        check_destination(out, label=os.fspath(out))
+    try:
+        records, images, lost = _run_all(runs, scenes, settings, data, out, kind, frame_list, last, every, seed,
+                                 cell_size, video, workers, scheduler, progress)
+    finally:
+        if data is not None:
+            data.close()
+    ordered = [records[r.id] for r in runs]
+    if kind == "sheet":
+        fps = scenes[runs[0].id].simulation.frames_per_sec
+        spec = S.plan(runs, space, frame_list, fps, samples is not None)
+        picture = S.compose(spec, images, cell_size)
+        from PIL import Image
+
+        with atomic_output(out, label=os.fspath(out)) as tmp:
+            Image.fromarray(picture).save(tmp, format="PNG", optimize=True)
+    if report:
+        _summary(ordered, time.perf_counter() - start, out, lost)
+    return ordered
+
+
+def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, Any], data: ds.Dataset | None,
+             out: Any, kind: str, frame_list: list[int], last: int, every: int, seed: int | None,
+             cell_size: tuple[int, int], video: bool, workers: int | None, scheduler: str | None,
+             progress: bool) -> tuple[dict[str, dict[str, Any]], dict[tuple[str, int], np.ndarray | None], int]:
+    """Run every run not finished yet; return the records by id, a contact sheet's cells, and the
+    number of runs lost with a worker."""
+    finished: dict[str, dict[str, Any]] = {}
+    if data is not None:
         if data.resumed:
             n_samples = len(sample_frames(last, every))
             expected = {r.id: {"params": json.loads(json.dumps(r.params)), "samples": n_samples} for r in runs}
             finished = data.finished(expected)
-    else:
-        check_destination(out, label=os.fspath(out))
 
     samples_msaa = {rid: s.samples for rid, s in settings.items()}
     tasks = [Task(id=r.id, scene=scenes[r.id], frames=last, every=every, positions=kind == "dataset",
@@ -205,35 +237,29 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
                     task = futures.pop(future)  # drop the result with it once written: memory stays flat
                     try:
                         result = future.result()
-                    except concurrent.futures.process.BrokenProcessPool:
-                        result = None
-                    except Exception as exc:  # noqa: BLE001 - a worker lost on a cluster, a transfer failure
-                        result = {"id": task.id, "status": "failed", "seconds": 0.0,
-                                  "error": " ".join(f"{type(exc).__name__}: {exc}".split())}
-                    if result is None:
+                    except Exception as exc:  # noqa: BLE001 - the run itself never raises (runner.run)
+                        # A local worker that died (BrokenProcessPool), a Dask worker lost with the
+                        # run (KilledWorker), a transfer that failed: the run has no result, which
+                        # is not a property of its parameters. It is not recorded, so the same
+                        # command runs it again.
                         lost += 1
                         records[task.id] = {"id": task.id, "params": by_id[task.id].params, "seed": seed,
                                             "status": "failed", "path": None, "frames": last, "seconds": 0.0,
-                                            "error": "the worker process running it died (not recorded: "
-                                                     "the same command runs it again)", "skipped": False,
-                                            "lost": True}
+                                            "error": _lost_reason(exc), "skipped": False, "lost": True}
                     else:
                         finish(result)
                     bar.update(1)
         finally:
             bar.close()
-    ordered = [records[r.id] for r in runs]
-    if kind == "sheet":
-        fps = scenes[runs[0].id].simulation.frames_per_sec
-        spec = S.plan(runs, space, frame_list, fps, samples is not None)
-        picture = S.compose(spec, images, cell_size)
-        from PIL import Image
+    return records, images, lost
 
-        with atomic_output(out, label=os.fspath(out)) as tmp:
-            Image.fromarray(picture).save(tmp, format="PNG", optimize=True)
-    if report:
-        _summary(ordered, time.perf_counter() - start, out, lost)
-    return ordered
+
+def _lost_reason(exc: BaseException) -> str:
+    if isinstance(exc, concurrent.futures.process.BrokenProcessPool):
+        why = "the worker process running it died"
+    else:
+        why = " ".join(f"{type(exc).__name__}: {exc}".split())
+    return f"{why} (not recorded: the same command runs it again)"
 
 
 def _workers_default() -> int:
@@ -251,15 +277,16 @@ def _bar(total: int, show: bool) -> Any:
 
 def _summary(records: list[dict[str, Any]], seconds: float, out: Any, lost: int) -> None:
     done = sum(1 for r in records if r["status"] == "done" and not r["skipped"])
-    failed = sum(1 for r in records if r["status"] == "failed" and not r["skipped"])
+    failed = sum(1 for r in records if r["status"] == "failed" and not r["skipped"] and not r.get("lost"))
     skipped = sum(1 for r in records if r["skipped"])
     ran = done + failed
     rate = 60.0 * ran / seconds if seconds > 0 else 0.0
-    print(f"sweep: {len(records)} runs: {done} done, {failed} failed, {skipped} skipped "
+    lost_text = f", {lost} lost" if lost else ""
+    print(f"sweep: {len(records)} runs: {done} done, {failed} failed{lost_text}, {skipped} skipped "
           f"in {seconds:.1f} s ({rate:.1f} runs/min); wrote {os.fspath(out)}", file=sys.stderr)
     for r in records:
         if r["status"] == "failed" and not r["skipped"]:
-            print(f"sweep: {r['id']} failed: {r['error']}", file=sys.stderr)
+            print(f"sweep: {r['id']} {'lost' if r.get('lost') else 'failed'}: {r['error']}", file=sys.stderr)
     if lost:
         print(f"sweep: {lost} runs were lost with a worker that died; run the same command again to finish them",
               file=sys.stderr)

@@ -6,19 +6,27 @@ once when the folder is made; the same OUT with a different definition is refuse
 finish. ``OUT/runs/<id>.npz`` (and ``<id>.mp4`` with video) appear atomically. On resume, the
 last record of each run counts, and a ``done`` record counts only if its files are there and
 read back whole; every other run is done again.
+
+The folder is locked for the whole sweep (``OUT/.clothsim.lock``, see :mod:`clothsim.locks`): a
+second sweep into it, the same command or another, stops with one line naming the holder and
+writes nothing. A folder that does not exist is created when it is locked (and removed again if
+the sweep ends before writing its definition). Once the lock is held, the temporary files of a
+sweep that was killed while writing (``runs/.run_00001.XXXXXXXX.tmp.npz``) are removed.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import re
 import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..atomic import atomic_output, check_destination, os_errors
+from .. import locks
+from ..atomic import atomic_output, check_destination, check_name, os_errors
 from ..errors import ClothsimError
 
 __all__ = ["DEFINITION", "MANIFEST", "RUNS", "Dataset", "NPZ_KEYS"]
@@ -28,6 +36,9 @@ MANIFEST = "manifest.jsonl"
 RUNS = "runs"
 FORMAT = "clothsim-sweep/1"
 NPZ_KEYS = ("positions", "faces", "uv", "pinned", "scene", "frames")
+# Temporary names (clothsim.atomic) of the files a sweep writes: left behind only by a killed sweep.
+_STALE_TOP = re.compile(r"\.sweep\.[a-z0-9_]{8}\.tmp\.json")
+_STALE_RUN = re.compile(r"\.run_\d{5,}\.[a-z0-9_]{8}\.tmp\.(npz|mp4)")
 
 
 class Dataset:
@@ -38,18 +49,81 @@ class Dataset:
         self.out = Path(out)
         self.definition = {"format": FORMAT, **definition}
         self.resumed = False
+        self._lock: locks.OutputLock | None = None
+        self._created: list[Path] = []
 
     # -- before any run ------------------------------------------------------------------------
+    def open(self) -> None:
+        """Check OUT, lock it (creating it if missing) and remove a killed sweep's temporary files.
+
+        Refuses an OUT that is not a folder, holds someone else's files or another sweep, or is
+        being written by another process. Call :meth:`close` at the end, however the sweep ends.
+        """
+        with os_errors(self.label, "cannot check"):
+            if self.out.is_dir():  # a sweep writing it now is named first, whatever else is wrong
+                locks.probe(self.out / locks.LOCK_NAME, self.label)
+        self.check()  # before locking: nothing is created in a folder that is refused anyway
+        try:
+            self._take_lock()
+            self.check()  # again, now that no other sweep can change it
+            with os_errors(self.label, "cannot remove a killed sweep's temporary file"):
+                self._remove_stale()
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Unlock OUT; if this sweep created it and wrote nothing, remove it again."""
+        if self._lock is not None:
+            self._lock.release()
+            self._lock = None
+        for folder in reversed(self._created):
+            try:
+                folder.rmdir()  # only if empty: the definition or a run is in it once started
+            except OSError:
+                break
+        self._created = []
+
+    def _take_lock(self) -> None:
+        out, label = self.out, self.label
+        with os_errors(label, "cannot create the folder"):
+            if out.is_dir():
+                self._lock = locks.lock_inside(out, label)
+                return
+            # Beside it while it is created: a frames folder or OBJ sequence being built under a
+            # temporary name for the same path holds that lock until it is renamed into place.
+            for folder in reversed([f for f in out.parents if not f.exists()]):
+                folder.mkdir()
+                self._created.append(folder)
+            with locks.holding(locks.lock_beside(out, label)):
+                if not out.exists():
+                    out.mkdir()
+                    self._created.append(out)
+                self._lock = locks.lock_inside(out, label)
+
+    def _remove_stale(self) -> None:
+        for folder, pattern in ((self.out, _STALE_TOP), (self.out / RUNS, _STALE_RUN)):
+            try:
+                entries = list(os.scandir(folder))
+            except FileNotFoundError:
+                continue
+            for entry in entries:
+                if pattern.fullmatch(entry.name) and entry.is_file(follow_symlinks=False):
+                    os.unlink(entry.path)
+
     def check(self) -> None:
         """Refuse an OUT that is not a folder, holds someone else's files or another sweep."""
         out, label = self.out, self.label
-        if out.is_symlink():
-            out = self.out = Path(os.path.realpath(out))
-        if out.exists():
+        check_name(out, label)
+        with os_errors(label, "cannot check"):
+            if out.is_symlink():
+                out = self.out = Path(os.path.realpath(out))
+            exists = out.exists()
+        if exists:
             if not out.is_dir():
                 raise ClothsimError(f"{label}: exists and is not a folder (a dataset is a folder)")
             with os_errors(label, "cannot read the folder"):
-                names = os.listdir(out)
+                names = [n for n in os.listdir(out) if not locks.is_lock_name(n) and not _STALE_TOP.fullmatch(n)]
             if names:
                 if DEFINITION not in names:
                     raise ClothsimError(f"{label}: folder is not empty ({len(names)} "

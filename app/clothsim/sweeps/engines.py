@@ -14,6 +14,8 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
+import time
 from collections.abc import Iterator
 from concurrent.futures import Executor, ProcessPoolExecutor
 
@@ -22,6 +24,8 @@ from ..errors import ClothsimError
 __all__ = ["CLUSTER_HINT", "default_workers", "open_executor"]
 
 CLUSTER_HINT = "pip install 'clothsim[cluster]'"
+_WATCH_SECONDS = 0.5  # how often a worker checks that the command is still running
+_REAP_SECONDS = 5.0  # how long an ended sweep waits for its killed workers and the pool's thread
 
 
 def default_workers() -> int:
@@ -32,15 +36,59 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-def _init_worker() -> None:
+def _init_worker(parent: int) -> None:
     # Ctrl-C reaches the whole process group: the command handles it (and stops the workers),
     # a worker must not print its own traceback.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _leave_stdout()
+    _follow_parent(parent)
     # One Numba thread per worker process: the processes are the parallelism. Results are
     # bit-identical for any thread count, so this changes the speed only.
     import numba
 
     numba.set_num_threads(1)
+
+
+def _leave_stdout() -> None:
+    """Point the worker's standard output at its standard error, and its input at /dev/null.
+
+    A spawned worker inherits the command's descriptors. Holding its stdout would keep a pipe
+    such as ``clothsim sweep ... | tail`` open after the command has ended (killed, say), so the
+    reader would wait for the workers. Nothing a worker prints is the command's output; anything
+    it does print (a library's notice) still reaches the terminal, as a diagnostic.
+    """
+    sys.stdout.flush()
+    os.dup2(2, 1)
+    with contextlib.suppress(OSError):
+        null = os.open(os.devnull, os.O_RDONLY)
+        os.dup2(null, 0)
+        os.close(null)
+
+
+def _follow_parent(parent: int) -> None:
+    """End this worker when the command that started it is gone (killed with ``kill -9``, say).
+
+    On Linux the operating system sends SIGKILL when the thread that started the worker ends
+    (``PR_SET_PDEATHSIG``; this works even while a Numba kernel holds the interpreter lock, and
+    the sweep's calling thread outlives its workers). Everywhere, a thread checks every half
+    second that the parent is still this process's parent. A worker writes no file, so ending
+    it at once loses nothing the command could still use.
+    """
+    with contextlib.suppress(Exception):
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        arg = ctypes.c_ulong
+        libc.prctl(1, arg(int(signal.SIGKILL)), arg(0), arg(0), arg(0))  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # already gone before the line above took effect
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(_WATCH_SECONDS)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="clothsim-parent-watch", daemon=True).start()
 
 
 def import_distributed(label: str = "--scheduler") -> object:
@@ -100,8 +148,17 @@ def open_executor(workers: int | None = None, scheduler: str | None = None) -> I
             reason = " ".join(str(exc).split()) or type(exc).__name__
             raise ClothsimError(f"--scheduler {scheduler}: cannot connect: {reason}") from None
         try:
-            with client.get_executor() as executor:
+            executor = client.get_executor()
+            try:
                 yield executor
+            except BaseException:
+                # Interrupted or failed: cancel the queued and running runs now. Leaving the
+                # executor's block would wait for every one of them (shutdown(wait=True)), and
+                # their results would be thrown away.
+                with contextlib.suppress(Exception):
+                    executor.shutdown(wait=False)
+                raise
+            executor.shutdown(wait=True)
         finally:
             client.close()
         return
@@ -109,14 +166,18 @@ def open_executor(workers: int | None = None, scheduler: str | None = None) -> I
     # notebook) holds a threading layer that is not safe to fork.
     context = multiprocessing.get_context("spawn")
     count = workers or default_workers()
-    executor = ProcessPoolExecutor(max_workers=count, mp_context=context, initializer=_init_worker)
+    _start_tracker()
+    executor = ProcessPoolExecutor(max_workers=count, mp_context=context, initializer=_init_worker,
+                                   initargs=(os.getpid(),))
     try:
         _start_workers(executor, count)
         yield executor
     except BaseException:
         # Interrupted or failed: stop the workers now rather than wait for their runs to end.
+        internals = _internals(executor)  # shutdown() forgets them
         _stop_workers(executor, signal.SIGKILL)
         executor.shutdown(wait=False, cancel_futures=True)
+        _unblock_pool(*internals)
         raise
     # Every result is in and a worker keeps nothing worth saving (it writes no file), so it is
     # ended here instead of tearing down its interpreter: a spawned worker's exit unloads
@@ -126,7 +187,51 @@ def open_executor(workers: int | None = None, scheduler: str | None = None) -> I
     executor.shutdown(wait=True)
 
 
+def _start_tracker() -> None:
+    """Start multiprocessing's resource tracker without its warning about leaked semaphores.
+
+    The tracker outlives a command killed with ``kill -9`` until its workers have followed it
+    (well under a second), then removes the pool's semaphores and would print a two-line
+    ``UserWarning`` about each "leak" under whatever the user typed next; the semaphores are
+    removed either way. The tracker takes its warning options from this process's when it
+    starts, so the filter is added for that moment only.
+    """
+    from multiprocessing import resource_tracker
+
+    options = list(sys.warnoptions)
+    sys.warnoptions.append("ignore:resource_tracker:UserWarning")
+    try:
+        with contextlib.suppress(Exception):
+            resource_tracker.ensure_running()
+    finally:
+        sys.warnoptions[:] = options
+
+
 def _stop_workers(executor: ProcessPoolExecutor, how: signal.Signals) -> None:
     for process in list((getattr(executor, "_processes", None) or {}).values()):
         with contextlib.suppress(Exception):
             os.kill(process.pid, how)
+
+
+def _internals(executor: ProcessPoolExecutor) -> tuple[list, object, object]:
+    return (list((getattr(executor, "_processes", None) or {}).values()),
+            getattr(executor, "_result_queue", None), getattr(executor, "_executor_manager_thread", None))
+
+
+def _unblock_pool(processes: list, result_queue: object, thread: object) -> None:
+    """Let the pool's manager thread end after its workers were killed, and wait for it.
+
+    A worker killed while sending a result leaves half a message in the result pipe; the
+    manager thread then blocks reading the rest, for ever, since this process holds the
+    pipe's write end too, and the interpreter joins that thread at exit: the command would
+    print its error and never return. Once the workers are dead, closing this process's
+    write end turns that read into an end of file, which the thread handles as a broken pool.
+    """
+    deadline = time.monotonic() + _REAP_SECONDS
+    for process in processes:
+        with contextlib.suppress(Exception):
+            process.join(max(0.0, deadline - time.monotonic()))
+    with contextlib.suppress(Exception):
+        result_queue._writer.close()  # type: ignore[attr-defined]
+    if isinstance(thread, threading.Thread):
+        thread.join(max(0.0, deadline - time.monotonic()))

@@ -16,6 +16,7 @@ import dataclasses
 import itertools
 import json
 import math
+import re
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -30,6 +31,7 @@ __all__ = ["Distribution", "Run", "build_scene", "expand", "parse_set", "parse_v
            "scene_json", "set_field"]
 
 _DISTRIBUTIONS = ("uniform", "loguniform")
+_INDEX = re.compile(r"[0-9]+")  # a list index in a field path
 
 
 @dataclass(frozen=True)
@@ -138,7 +140,12 @@ def _path_parts(field: str) -> list[str | int]:
     for part in field.split("."):
         if not part:
             raise ClothsimError(f"--set {field}: empty component in the field path")
-        parts.append(int(part) if part.isdigit() else part)
+        # ASCII digits only: str.isdigit() also accepts '²' and '①', which int() refuses.
+        if not _INDEX.fullmatch(part) and any(c.isdigit() or c.isnumeric() for c in part):
+            if not any(c.isalpha() or c == "_" for c in part):
+                raise ClothsimError(f"--set {field}: {part!r} is not a list index (an index is written "
+                                    "with the digits 0-9, e.g. sphere.1.radius)")
+        parts.append(int(part) if _INDEX.fullmatch(part) else part)
     if isinstance(parts[0], int):
         raise ClothsimError(f"--set {field}: a field path starts with an object name (cloth, sphere, ...)")
     return parts
