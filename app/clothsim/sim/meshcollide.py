@@ -33,7 +33,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .jit import CHUNKS, EXACT
+from ..jit import CHUNKS, EXACT
 from .meshgrid import DIMS_CELL0, DIMS_CLOSED, DIMS_K0, DIMS_K1, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
     INFO_HI, INFO_INV_H, INFO_LO
 from .team import share

@@ -23,7 +23,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from .jit import KERNEL
+from ..jit import KERNEL
 from .shapes import CAPSULE_CARRY, CUBOID_CARRY, samples
 from .track import track_at as position_at
 

@@ -1,8 +1,8 @@
 """The position corrections every integrator shares, run after its update in the spec's order:
 self-collision -> colliders -> Provot.
 
-``post`` is a tuple packed once per run by :func:`clothsim.sim.integrators.post_args`, so each
-integrator's compiled loop takes one argument for all of them.
+``post`` is the :class:`~clothsim.sim.state.Corrections` group packed by
+:func:`clothsim.sim.solvers.post_args`, so the integrators' substep takes one argument for all of them.
 """
 
 from __future__ import annotations
@@ -10,12 +10,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .jit import EXACT
+from ..jit import EXACT
 
 from .constraints import provot
-from .frame import collide_reachable
+from .colliders import collide_reachable
 from .meshcollide import mesh_corrections
 from .selfcollide import self_collide
+from .state import Corrections
 
 
 @njit(**EXACT)
@@ -24,20 +25,16 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
     """Apply self-collision, colliders and Provot in place at substep ``substep`` of the call;
     returns the colliders skipped.
 
-    ``post`` = (pinned, self_mode, thickness, sim_steps, cell, keys, slots, start, order,
-    stretch_limit, colliders, motion, mesh): the :class:`~clothsim.sim.state.Colliders` group, the
-    :class:`~clothsim.sim.moving.Motion` group and the :class:`~clothsim.sim.meshgrid.MeshGroup`,
-    each None when the scene has none.
+    ``post`` is the :class:`~clothsim.sim.state.Corrections` group.
     """
-    (pinned, self_mode, thickness, sim_steps, cell, keys, slots, start, order, stretch_limit, col, mov, mesh) = post
     skipped = 0
-    if self_mode != 0:
-        self_collide(pos, free, thickness, sim_steps, self_mode, cell[0], cell[1], cell[2], keys, slots, start,
-                     order)
-    skipped += collide_group(pos, last, col, mov, substep)
-    skipped += mesh_corrections(pos, last, free, mesh)
-    if stretch_limit > 0.0:
-        provot(pos, pinned, blocks, rest, nw, stretch_limit)
+    if post.self_mode != 0:
+        self_collide(pos, free, post.thickness, post.sim_steps, post.self_mode, post.cell[0], post.cell[1],
+                     post.cell[2], post.keys, post.slots, post.start, post.order)
+    skipped += collide_group(pos, last, post.col, post.mov, substep)
+    skipped += mesh_corrections(pos, last, free, post.mesh)
+    if post.stretch_limit > 0.0:
+        provot(pos, post.pinned, blocks, rest, nw, post.stretch_limit)
     return skipped
 
 
@@ -49,6 +46,6 @@ def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, mov: tup
     return collide_reachable(pos, last, col, mov, col.capsules, col.cuboids, substep)
 
 
-def has_corrections(post: tuple) -> bool:
+def has_corrections(post: Corrections) -> bool:
     """True when any correction pass is on (then velocities must be re-derived from positions)."""
-    return bool(post[1] != 0 or post[10] is not None or post[9] > 0.0 or post[12] is not None)
+    return bool(post.self_mode != 0 or post.col is not None or post.stretch_limit > 0.0 or post.mesh is not None)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .jit import CHUNKS, KERNEL
+from ..jit import CHUNKS, KERNEL
 from .team import share
 from .track import IEEE
 from .track import track_at as offset_at

@@ -22,7 +22,7 @@ import numpy as np
 from numba import njit, prange
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from .jit import CHUNKS, EXACT, KERNEL, PARALLEL
+from ..jit import CHUNKS, EXACT, KERNEL, PARALLEL
 from .team import share
 
 MODE_SPEC = 1

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from .jit import KERNEL
+from ..jit import KERNEL
 
 #: Columns of a capsule row and of a box row (see the module's docstring).
 CAPSULE_COLUMNS = 11

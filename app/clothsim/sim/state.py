@@ -130,3 +130,38 @@ class PinMotion(NamedTuple):
     velocity: np.ndarray
     dt: float
     clock: np.ndarray
+
+
+class Corrections(NamedTuple):
+    """The position corrections every integrator but the fast path runs after its advance
+    (:func:`clothsim.sim.passes.corrections`): the pinned mask, the self-collision mode (0 = off)
+    with its hash arrays, Provot's limit (<= 0 = off), and the colliders, moving-collider and mesh
+    groups (each None when the scene has none)."""
+
+    pinned: np.ndarray
+    self_mode: int
+    thickness: float
+    sim_steps: int
+    cell: np.ndarray
+    keys: np.ndarray
+    slots: np.ndarray
+    start: np.ndarray
+    order: np.ndarray
+    stretch_limit: float
+    col: tuple | None
+    mov: tuple | None
+    mesh: tuple | None
+
+
+class Plan(NamedTuple):
+    """Every group of a scene's compiled plan, in the frame kernel's argument order; a pass the
+    scene does not use is None (see the module's notes)."""
+
+    st: ClothState
+    spec: SpecHash | None
+    grid: GridHash | None
+    col: Colliders | None
+    mov: tuple | None
+    mesh: tuple | None
+    wind: Wind | None
+    pins: PinMotion | None
