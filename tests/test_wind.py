@@ -13,7 +13,7 @@ from numba import njit
 import clothsim
 from clothsim.errors import FieldError, SceneError
 from clothsim.scene import scene_from_dict
-from clothsim.sim.aero import add_wind, air_velocity, incidence, triangles
+from clothsim.sim.passes.wind import add_wind, air_velocity, incidence, triangles
 from clothsim.sim.state import Wind
 from clothsim.wind import GUST_MODES, WindSpec, gust_modes, wind_rows
 

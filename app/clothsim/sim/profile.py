@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 
 
-from .frame import PASS_COLLIDERS, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF
+from .solvers.frame import PASS_COLLIDERS, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF
 
 PASSES = ("forces+integrate", "self-collision", "colliders", "provot")
 

@@ -11,15 +11,15 @@ from ..scene import Scene, check_field
 from ..validate import At, check, integer
 from ..wind import WINDS, wind_rows
 from . import team
-from .collide import SURFACE_OFFSET
-from .frame import PASS_ALL, kernel_addresses, run_substeps
-from .aero import incidence, triangles
+from .passes.colliders.primitives import SURFACE_OFFSET
+from .solvers.frame import PASS_ALL, kernel_addresses, run_substeps
+from .passes.wind import incidence, triangles
 from ..jit import CHUNKS
-from .pinmotion import move_pins
-from .moving import pack_motion, top_speed
-from .shapes import collider_rows
-from .meshgrid import mesh_group
-from .selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
+from .passes.pins import move_pins
+from .passes.colliders.moving import pack_motion, top_speed
+from .passes.colliders.shapes import collider_rows
+from .passes.colliders.meshgrid import mesh_group
+from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
 from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash, Wind
 
 _SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID}

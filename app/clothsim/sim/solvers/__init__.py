@@ -26,8 +26,8 @@ from typing import Any
 import numba
 import numpy as np
 
-from ..forces import accumulate_forces
-from ..passes import has_corrections
+from ..passes.springs import accumulate_forces
+from ..passes.corrections import has_corrections
 from ..state import Corrections
 from .implicit import CG_MAX_ITERATIONS, CG_TOLERANCE, Implicit
 from .substep import Step, integrate_substeps

@@ -9,12 +9,13 @@ applies. Pinned points are removed by masking (their dv is 0). Jacobi preconditi
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from typing import NamedTuple
-
 from ...jit import KERNEL
+
 
 class Implicit(NamedTuple):
     """The implicit Euler rule's arrays: the free-point mask, the springs (ends, stiffness), the

@@ -8,7 +8,7 @@ An integrator is only its advance rule, a group of its own (:class:`~.verlet.Ver
 :class:`~.symplectic.Symplectic`, :class:`~.implicit.Implicit`, :class:`~.xpbd.Xpbd`): exactly one
 is given, the others are ``None``, and Numba prunes the branches of the absent ones before typing,
 so each integrator compiles only its own code, as each optional pass (wind, pins, colliders) does.
-The spec's fast path runs the same passes' work items in the thread team (:mod:`..frame`).
+The spec's fast path runs the same passes' work items in the thread team (:mod:`.frame`).
 """
 
 from __future__ import annotations
@@ -19,10 +19,10 @@ import numpy as np
 from numba import njit
 
 from ...jit import EXACT, KERNEL
-from ..aero import add_wind
-from ..forces import accumulate_forces
-from ..passes import corrections
-from ..pinmotion import move_pins, pin_velocities, substep_time
+from ..passes.wind import add_wind
+from ..passes.springs import accumulate_forces
+from ..passes.corrections import corrections
+from ..passes.pins import move_pins, pin_velocities, substep_time
 from .implicit import Implicit, implicit_update
 from .symplectic import Symplectic, symplectic_step
 from .verlet import VerletRate, verlet_rate_step

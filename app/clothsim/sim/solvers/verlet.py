@@ -8,9 +8,9 @@ phi = 1 and f = 1: plain Verlet).
 
 from __future__ import annotations
 
-import numpy as np
 from typing import NamedTuple
 
+import numpy as np
 from numba import njit
 
 from ...jit import CHUNKS, KERNEL

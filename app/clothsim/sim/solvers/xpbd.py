@@ -9,12 +9,13 @@ does not depend on the iteration count or on dt (unlike plain PBD stiffness fact
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from typing import NamedTuple
-
 from ...jit import KERNEL
+
 
 class Xpbd(NamedTuple):
     """The XPBD rule's arrays: inverse masses ``w`` (0 for pinned points), the springs (ends,

@@ -15,7 +15,7 @@ passes, and a new feature adds a field or a group, not a dozen positional argume
 Colliders are tested against the cloth's bounding box first: a sphere the box does not reach, or
 a plane the box (of current and last positions) lies wholly on one side of, cannot act this
 substep and is skipped exactly. Triangle meshes come as a group of their own
-(:class:`~clothsim.sim.meshgrid.MeshGroup`, after the spheres and planes of each point's chunk);
+(:class:`~clothsim.sim.passes.colliders.meshgrid.MeshGroup`, after the spheres and planes of each point's chunk);
 their pass is called by address, like the spec hash's query, so that it compiles beside the member
 and is not re-optimised inside it.
 """
@@ -28,21 +28,21 @@ import numba
 import numpy as np
 from numba import njit, prange, types
 
-from ..jit import CHUNKS, KERNEL, PARALLEL
-from ..jit.internals import call_native, native_address
+from ...jit import CHUNKS, KERNEL, PARALLEL
+from ...jit.internals import call_native, native_address
 
-from .aero import wind_chunks, wind_gather
-from .colliders import collide_part, member_bounds, merge_bounds, reach_colliders
-from .constraints import provot_band, provot_bands, provot_cut
-from .forces import gather_chunk, spring_job
-from .solvers.verlet import verlet_chunk
-from .pinmotion import offset_at, pin_chunk, substep_time
-from .moving import moving, update_poses
-from .shapes import flags_for
-from .meshcollide import collide_meshes_chunk, mesh_flags, reachable_meshes
-from .selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
-from .state import Plan
-from .team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
+from ..passes.wind import wind_chunks, wind_gather
+from ..passes.colliders import collide_part, member_bounds, merge_bounds, reach_colliders
+from ..passes.provot import provot_band, provot_bands, provot_cut
+from ..passes.springs import gather_chunk, spring_job
+from .verlet import verlet_chunk
+from ..passes.pins import offset_at, pin_chunk, substep_time
+from ..passes.colliders.moving import moving, update_poses
+from ..passes.colliders.shapes import flags_for
+from ..passes.colliders.mesh import collide_meshes_chunk, mesh_flags, reachable_meshes
+from ..passes.selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
+from ..state import Plan
+from ..team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
 
 #: Pass bits of :func:`run_substeps`: spring forces and Verlet, self-collision, colliders, Provot.
 PASS_INTEGRATE, PASS_SELF, PASS_COLLIDERS, PASS_PROVOT = 1, 2, 4, 8
@@ -239,8 +239,8 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
 
 @lru_cache(maxsize=None)
 def _addresses(argtypes: tuple) -> tuple[int, int, int]:
-    from ..jit.compile import compile_elsewhere, warm_side_kernels
-    from . import guard, rest  # noqa: F401 - they register their kernels' warm-up on import
+    from ...jit.compile import compile_elsewhere, warm_side_kernels
+    from .. import guard, rest  # noqa: F401 - they register their kernels' warm-up on import
 
     # argtypes = (member, size, steps, *the Plan's groups, sync, passes)
     groups = Plan(*argtypes[3 : 3 + len(Plan._fields)])
@@ -280,8 +280,8 @@ def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tup
                      mesh: tuple | None, wind: tuple | None, pins: tuple | None,
                      sync: np.ndarray) -> tuple[int, int, int]:
     """Addresses of :func:`_member` compiled for these state groups, of the
-    :func:`~clothsim.sim.selfcollide.repel_slots` it calls (0 without the spec's hash) and of the
-    :func:`~clothsim.sim.meshcollide.collide_meshes_chunk` it calls (0 without meshes), compiled or
+    :func:`~clothsim.sim.passes.selfcollide.repel_slots` it calls (0 without the spec's hash) and of the
+    :func:`~clothsim.sim.passes.colliders.mesh.collide_meshes_chunk` it calls (0 without meshes), compiled or
     loaded from the cache on first use; the second goes into ``SpecHash.repel``, the third into
     ``MeshGroup.collide``."""
     i64 = types.int64
@@ -297,8 +297,8 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
 
     ``st``, ``spec``, ``grid``, ``col``, ``wind`` and ``pins`` are the named tuples of
     :mod:`clothsim.sim.state`, ``mov`` the tracks of moving colliders
-    (:class:`clothsim.sim.moving.Motion`) and ``mesh`` the
-    :class:`~clothsim.sim.meshgrid.MeshGroup`; all but ``st`` are ``None`` for a pass the scene
+    (:class:`clothsim.sim.passes.colliders.moving.Motion`) and ``mesh`` the
+    :class:`~clothsim.sim.passes.colliders.meshgrid.MeshGroup`; all but ``st`` are ``None`` for a pass the scene
     does not use (``mesh`` needs ``col``). ``sync`` is
     :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
     :mod:`clothsim.sim.team`); the result does not depend on it. After the call

@@ -1,7 +1,7 @@
 """The collider pass: the cloth's bounding box, the test of which colliders it can reach (a sphere
 the box does not reach, or a plane the box of current and last positions lies wholly on one side
 of, cannot act this substep and is skipped exactly), and the collisions themselves, kind by kind in
-scene order. The thread team (:mod:`.frame`) runs the work items (:func:`collide_part`) of the same
+scene order. The thread team (:mod:`clothsim.sim.solvers.frame`) runs the work items (:func:`collide_part`) of the same
 functions as :func:`collide_reachable`, the other integrators' pass.
 """
 
@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from ..jit import CHUNKS, KERNEL, PARALLEL
-from .collide import collide_planes, collide_spheres
+from ....jit import CHUNKS, KERNEL, PARALLEL
+from .primitives import collide_planes, collide_spheres
 from .moving import collide_moving_planes, collide_moving_spheres, reach_moving, update_poses
 from .shapes import collide_shapes, reach_shapes
-from .team import share
+from ...team import share
 
 
 @njit(**KERNEL)

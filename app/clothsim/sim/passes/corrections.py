@@ -10,13 +10,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..jit import EXACT
+from ...jit import EXACT
 
-from .constraints import provot
+from .provot import provot
 from .colliders import collide_reachable
-from .meshcollide import mesh_corrections
+from .colliders.mesh import mesh_corrections
 from .selfcollide import self_collide
-from .state import Corrections
+from ..state import Corrections
 
 
 @njit(**EXACT)

@@ -38,9 +38,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..cloth import cloth_triangles
-from ..jit import CHUNKS, KERNEL
-from .team import share
+from ...cloth import cloth_triangles
+from ...jit import CHUNKS, KERNEL
+from ..team import share
 
 
 @njit(inline="always", **KERNEL)
