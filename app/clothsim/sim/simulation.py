@@ -251,8 +251,7 @@ class Simulation:
             spec = SpecHash(self._cell, self._keys, self._slots, self._table, self._order, ~self.pinned, busy, xs, ys,
                             zs, ks, cum, counted, tally, 2.0 * cloth.thickness, steps, 0)
         elif self._self_mode == MODE_GRID:
-            grid = GridHash(self.free, cloth.thickness, steps, self._cell, self._keys, self._slots, self._table,
-                            self._order)
+            grid = self.self_hash()
         if self._meshes is not None:
             self._meshes.clock[1] = dt
         if self.n_colliders > 0:
@@ -261,6 +260,13 @@ class Simulation:
                             self._plane_on, self._boxes, margin, self._capsules, self._cuboids, self._capsule_on,
                             self._cuboid_on)
         return Plan(st, spec, grid, col, self._motion, self._meshes, self._wind_group(), self._pin_group())
+
+    def self_hash(self) -> GridHash:
+        """The self-collision hash's arrays and constants (the grid's group; the integrators'
+        corrections use it for either mode)."""
+        cloth = self.scene.cloth
+        return GridHash(self.free, cloth.thickness, self.scene.simulation.simulation_steps, self._cell, self._keys,
+                        self._slots, self._table, self._order)
 
     def _wind_group(self) -> Wind | None:
         rows, modes = wind_rows(self.scene.winds)
@@ -360,7 +366,7 @@ class Simulation:
         gave the frame up half-way (the state must be restored)."""
         self._start_clock(substep)
         if not self._member_at:
-            self._member_at, repel, collide = kernel_addresses(*self._kernel_args, self._sync)
+            self._member_at, repel, collide = kernel_addresses(self._kernel_args, self._sync)
             plan = self._kernel_args
             if plan.spec is not None:
                 plan = plan._replace(spec=plan.spec._replace(repel=repel))

@@ -134,19 +134,13 @@ class PinMotion(NamedTuple):
 
 class Corrections(NamedTuple):
     """The position corrections every integrator but the fast path runs after its advance
-    (:func:`clothsim.sim.passes.corrections.corrections`): the pinned mask, the self-collision mode (0 = off)
-    with its hash arrays, Provot's limit (<= 0 = off), and the colliders, moving-collider and mesh
-    groups (each None when the scene has none)."""
+    (:func:`clothsim.sim.passes.corrections.corrections`): the pinned mask, the self-collision mode
+    (0 = off) with its hash (a :class:`GridHash`, whichever the mode), Provot's limit (<= 0 = off),
+    and the colliders, moving-collider and mesh groups (each None when the scene has none)."""
 
     pinned: np.ndarray
     self_mode: int
-    thickness: float
-    sim_steps: int
-    cell: np.ndarray
-    keys: np.ndarray
-    slots: np.ndarray
-    start: np.ndarray
-    order: np.ndarray
+    hash: GridHash
     stretch_limit: float
     col: tuple | None
     mov: tuple | None

@@ -29,8 +29,9 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
     """
     skipped = 0
     if post.self_mode != 0:
-        self_collide(pos, free, post.thickness, post.sim_steps, post.self_mode, post.cell[0], post.cell[1],
-                     post.cell[2], post.keys, post.slots, post.start, post.order)
+        h = post.hash
+        self_collide(pos, free, h.thickness, h.sim_steps, post.self_mode, h.cell[0], h.cell[1], h.cell[2], h.keys,
+                     h.slots, h.start, h.order)
     skipped += collide_group(pos, last, post.col, post.mov, substep)
     skipped += mesh_corrections(pos, last, free, post.mesh)
     if post.stretch_limit > 0.0:

@@ -109,9 +109,7 @@ class IntegratorState:
 def post_args(sim: Any) -> Corrections:
     """The correction passes' group (:class:`~clothsim.sim.state.Corrections`)."""
     plan = sim._kernel_args
-    return Corrections(sim.pinned, sim._self_mode, sim.scene.cloth.thickness, sim.scene.simulation.simulation_steps,
-                       sim._cell, sim._keys, sim._slots, sim._table, sim._order, sim._stretch_limit, plan.col,
-                       plan.mov, plan.mesh)
+    return Corrections(sim.pinned, sim._self_mode, sim.self_hash(), sim._stretch_limit, plan.col, plan.mov, plan.mesh)
 
 
 def state_of(sim: Any) -> IntegratorState:

@@ -276,17 +276,14 @@ def _addresses(argtypes: tuple) -> tuple[int, int, int]:
             0 if collide is None else native_address(collide_meshes_chunk, collide))
 
 
-def kernel_addresses(st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None, mov: tuple | None,
-                     mesh: tuple | None, wind: tuple | None, pins: tuple | None,
-                     sync: np.ndarray) -> tuple[int, int, int]:
+def kernel_addresses(plan: Plan, sync: np.ndarray) -> tuple[int, int, int]:
     """Addresses of :func:`_member` compiled for these state groups, of the
     :func:`~clothsim.sim.passes.selfcollide.repel_slots` it calls (0 without the spec's hash) and of the
     :func:`~clothsim.sim.passes.colliders.mesh.collide_meshes_chunk` it calls (0 without meshes), compiled or
     loaded from the cache on first use; the second goes into ``SpecHash.repel``, the third into
     ``MeshGroup.collide``."""
     i64 = types.int64
-    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (st, spec, grid, col, mov, mesh, wind, pins, sync)),
-                       i64))
+    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (*plan, sync)), i64))
 
 
 @njit(**PARALLEL)
