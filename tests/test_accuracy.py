@@ -16,7 +16,7 @@ from clothsim.bench.accuracy import (GROWTH_LIMIT, Run, observed_order, perturba
 from clothsim.cli import main
 from clothsim.scene import INTEGRATORS
 from clothsim.sim import Simulation
-from clothsim.sim.integrators import damping_rate
+from clothsim.sim.solvers import damping_rate
 
 EXPECTED = {"verlet": (1.8, 2.2), "symplectic_euler": (0.8, 1.2), "implicit_euler": (0.8, 1.2),
             "xpbd": (0.8, 1.2)}

@@ -15,7 +15,7 @@ import pytest
 from clothsim.errors import SceneError
 from clothsim.scene import load_scene, scene_from_dict
 from clothsim.sim import Simulation
-from clothsim.sim.moving import posed
+from clothsim.sim.passes.colliders.moving import posed
 
 from conftest import error_line, run_cli
 

@@ -9,7 +9,7 @@ import clothsim
 from clothsim.errors import SimulationBlowUp
 from clothsim.scene import INTEGRATORS, load_scene
 from clothsim.sim.guard import estimate_stable_substeps, stability_warning
-from clothsim.sim.integrators import IntegratorState, damping_factors, damping_rate
+from clothsim.sim.solvers import IntegratorState, damping_factors, damping_rate
 
 
 def small(name: str = "pinned4", n: int = 6, **cloth):
@@ -42,7 +42,7 @@ def test_spec_path_matches_the_numpy_step_and_never_uses_advance(name: str, monk
     independent implementation of the same forces, Verlet step and collisions. Provot is off: the
     NumPy version corrects all springs at once (Jacobi), the kernel in place, so they differ
     there by design."""
-    import clothsim.sim.integrators as integrators
+    import clothsim.sim.solvers as integrators
     from clothsim.bench.numpy_baseline import NumpyCloth
 
     monkeypatch.setattr(integrators, "advance", lambda sim, steps: pytest.fail("spec path must not call advance"))
@@ -212,7 +212,7 @@ def test_small_cloths_off_the_spec_path_run_on_one_thread(n: int, expected: int,
     # count is back afterwards.
     import numba
 
-    from clothsim.sim import integrators
+    from clothsim.sim import solvers as integrators
 
     if numba.config.NUMBA_NUM_THREADS < 2:
         pytest.skip("Numba has a single thread here: nothing to compare")

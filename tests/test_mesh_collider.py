@@ -12,9 +12,9 @@ from clothsim import Simulation, load_scene
 from clothsim.errors import SceneError
 from clothsim.meshcollider import rotation_matrix
 from clothsim.objfile import ObjError, parse_obj
-from clothsim.shapes import TORUS, box_obj, torus_obj
-from clothsim.sim.meshcollide import mesh_targets
-from clothsim.sim.meshgrid import mesh_group
+from clothsim.objshapes import TORUS, box_obj, torus_obj
+from clothsim.sim.passes.colliders.mesh import mesh_targets
+from clothsim.sim.passes.colliders.meshgrid import mesh_group
 
 from conftest import SCENES, error_line
 

@@ -12,7 +12,7 @@ import pytest
 from clothsim.render.renderer import SPHERE_DRAW_SCALE
 from clothsim.scene import load_scene
 from clothsim.sim import Simulation
-from clothsim.sim.selfcollide import MODE_SPEC, self_collide, table_size
+from clothsim.sim.passes.selfcollide import MODE_SPEC, self_collide, table_size
 
 
 def springless(scene_name="pinned4", **cloth):

@@ -84,7 +84,7 @@ def test_bad_render_setting_names_field(tmp_path):
 
 
 def test_simulation_commands_do_not_load_gl():
-    code = ("import sys, clothsim.cli as c; c.build_parser(); import clothsim.render.commands; "
+    code = ("import sys, clothsim.cli as c; c.build_parser(); import clothsim.cli.render; "
             "print('moderngl' in sys.modules, 'glcontext' in sys.modules)")
     env = dict(os.environ, PYTHONPATH=str(APP))
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)

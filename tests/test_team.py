@@ -11,11 +11,12 @@ import pytest
 
 import clothsim
 from clothsim.scene import load_scene
-from clothsim.sim import frame, team
-from clothsim.sim.frame import PASS_ALL
-from clothsim.sim.jit import CHUNKS
+from clothsim.sim import team
+from clothsim.sim.solvers import frame
+from clothsim.sim.solvers.frame import PASS_ALL
+from clothsim.jit import CHUNKS
 from clothsim.sim.profile import Profiler
-from clothsim.sim.selfcollide import count_slots, place_slots, query_share, scatter_slots, sort_by_slot
+from clothsim.sim.passes.selfcollide import count_slots, place_slots, query_share, scatter_slots, sort_by_slot
 from clothsim.sim.team import share
 
 

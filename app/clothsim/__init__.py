@@ -7,7 +7,8 @@ from typing import Any
 from .errors import ClothsimError, SceneError
 from .scene import Scene, load_scene
 
-__version__ = "0.1.0"
+from .version import __version__
+
 __all__ = ["ClothsimError", "Renderer", "Scene", "SceneError", "Simulation", "export", "load_scene", "sweep", "__version__"]
 
 

@@ -133,7 +133,7 @@ def spring_streams(nw: int, nh: int, blocks: np.ndarray, spring_k: np.ndarray,
     spring there (a row's wrap-around pair); a zero stiffness makes no force. ``spring_k`` and
     ``rest`` are per spring, in block order. Returns
     ``(offsets (B,), k (B, N), rest (B, N), buffer (B, 3, N + max offset))``; the buffer holds the
-    per-spring forces between the two passes of :func:`clothsim.sim.forces.accumulate_forces`
+    per-spring forces between the two passes of :func:`clothsim.sim.passes.springs.accumulate_forces`
     and must start zeroed.
     """
     n = nw * nh

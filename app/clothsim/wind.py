@@ -4,14 +4,14 @@
 "air_density": 1.2, "seed": 0, "turbulence_scale": 1.0}`` (SI units; one object or a list).
 ``turbulence`` is the largest speed (m/s) the gusts add to ``velocity``; ``turbulence_scale`` the
 length (m) of the largest gust. The forces themselves are computed by
-:mod:`clothsim.sim.aero`.
+:mod:`clothsim.sim.passes.wind`.
 
 The gust field of one wind is a sum of :data:`GUST_MODES` travelling waves,
 
     g(x, t) = turbulence * sum_k a_k d_k w(k_k . (x - U t) - f_k t + phi_k),
 
 with ``U`` the mean velocity (gusts are carried by the wind), unit directions ``d_k``, weights
-``a_k`` summing to 1 and ``w`` a C1 periodic wave bounded by 1 (see :func:`clothsim.sim.aero.wave`),
+``a_k`` summing to 1 and ``w`` a C1 periodic wave bounded by 1 (see :func:`clothsim.sim.passes.wind.wave`),
 so ``|g| <= turbulence`` everywhere and at every time; the modes (directions, wave vectors in
 cycles per metre, frequencies in Hz, phases in cycles) are drawn from ``seed`` alone.
 """
@@ -59,7 +59,7 @@ class WindSpec:
                 "turbulence_scale": self.turbulence_scale}
 
 
-# Speeds beyond a hurricane's are refused: the explicit drag term (see sim/aero.py) needs
+# Speeds beyond a hurricane's are refused: the explicit drag term (see sim/passes/wind.py) needs
 # dt * rho * C_d * |v| / density well below 1.
 MAX_SPEED = 1e3
 _DEFAULTS = WindSpec()

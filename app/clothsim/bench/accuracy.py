@@ -81,7 +81,7 @@ def two_mass_start(sim: Simulation) -> None:
 def two_mass_exact(scene: Scene, t: float) -> np.ndarray:
     """Closed form: r'' = -(2k/m)(r - L) - c r', r(0) = L + stretch, r'(0) = 0; positions (4, 3)."""
     from ..sim import Simulation
-    from ..sim.integrators import damping_rate
+    from ..sim.solvers import damping_rate
 
     c = damping_rate(scene.cloth.damping)
     m = scene.cloth.width * scene.cloth.height * scene.cloth.density / 4.0

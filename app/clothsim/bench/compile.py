@@ -28,7 +28,7 @@ COMMANDS: dict[str, list[str]] = {
     "tablecloth": ["simulate", "tablecloth", "--frames", "10", "--out", "{tmp}/s.npz"],
     "mesh": ["simulate", "mesh", "--frames", "10", "--out", "{tmp}/s.npz"],
 }
-_RUNNER = ("import sys; from clothsim.compiling import record_command; "
+_RUNNER = ("import sys; from clothsim.cli.compile import record_command; "
            "sys.exit(record_command(sys.argv[1], sys.argv[2:]))")
 
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..cloth import BENDING, BENDING_STIFFNESS_FACTOR
-from ..sim.collide import SURFACE_OFFSET
+from ..sim.passes.colliders.primitives import SURFACE_OFFSET
 
 
 def scatter_add(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:

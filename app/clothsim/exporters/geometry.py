@@ -9,7 +9,7 @@ Colliders become :class:`Collider` records. Each kind of collider is one functio
 polygon mesh (world space) and may write a primitive it knows natively instead (a USD sphere).
 Another kind of collider is one more function in that tuple. A collider with a ``motion`` keeps
 its scene pose in the record and its spec in ``moving``: a writer translates it by
-:func:`clothsim.sim.moving.shift` at each exported frame's time.
+:func:`clothsim.sim.passes.colliders.moving.shift` at each exported frame's time.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import numpy as np
 
 from ..render import mesh as render_mesh
 from ..scene import Scene
-from ..sim.moving import shift
+from ..sim.passes.colliders.moving import shift
 
 #: Rings and segments of a sphere written as polygons (the renderer's default resolution).
 SPHERE_RESOLUTION = (40, 40)
@@ -124,7 +124,7 @@ def _boxes(scene: Scene) -> Iterator[Collider]:
 
 
 def _meshes(scene: Scene) -> Iterator[Collider]:
-    from ..render.meshcollider import mesh_collider_vertices
+    from ..render.facets import mesh_collider_vertices
 
     for k, spec in enumerate(scene.meshes):
         verts, idx = mesh_collider_vertices(spec)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import __version__
+from ..version import __version__
 from .geometry import Collider, MeshData
 
 COLLIDERS_NAME = "colliders.obj"

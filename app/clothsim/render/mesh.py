@@ -13,7 +13,8 @@ import numpy as np
 from numba import njit
 
 from ..cloth import cloth_triangles, cloth_uvs  # noqa: F401 - the grid's, drawn here
-from ..sim.jit import EXACT
+from ..jit import EXACT
+from ..jit.compile import on_warm
 
 CLOTH_FLOATS = 9  # position(3) normal(3) tangent(3)
 
@@ -237,3 +238,10 @@ def box_mesh(center: tuple[float, float, float], half_extents: tuple[float, floa
                 verts.append([*(rot @ local + c), *(rot @ n), *(rot @ u), (su + 1) * 0.5, (sv + 1) * 0.5])
     idx = np.array([[4 * f, 4 * f + 1, 4 * f + 2, 4 * f, 4 * f + 2, 4 * f + 3] for f in range(6)], dtype=np.uint32)
     return np.asarray(verts, dtype=np.float32), idx.ravel()
+
+
+def _warm() -> None:
+    update_cloth_vertices(np.zeros((4, 3)), 2, 2, True, np.zeros((4, CLOTH_FLOATS), dtype=np.float32))
+
+
+on_warm("3 render mesh", _warm)

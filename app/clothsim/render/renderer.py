@@ -18,7 +18,7 @@ import numpy as np
 from ..cloth import Springs
 from ..errors import ClothsimError
 from ..scene import Scene, available_memory
-from ..sim.moving import posed, shift
+from ..sim.passes.colliders.moving import posed, shift
 from . import mesh, textures
 from .camera import Camera, default_position, default_target
 from .context import create_context
@@ -453,7 +453,7 @@ class Renderer:
     def _mesh_collider(self, spec: Any) -> tuple[Any, Any]:
         entry = self._meshes.get(id(spec))
         if entry is None or entry[0] is not spec:
-            from .meshcollider import mesh_collider_vertices
+            from .facets import mesh_collider_vertices
 
             if entry is not None:  # another scene's mesh had this id: drop what was built for it
                 for key in [k for k in self._vaos if k[1] == "mesh" and k[2] == id(spec)]:

@@ -22,7 +22,8 @@ from numba import njit
 
 from ..cloth import BENDING, BENDING_STIFFNESS_FACTOR, all_springs, enabled_mask, grid_positions, pinned_mask
 from ..scene import Scene
-from .jit import EXACT
+from ..jit import EXACT
+from ..jit.compile import on_warm
 
 EXPLICIT_INTEGRATORS = ("verlet", "symplectic_euler")
 
@@ -155,3 +156,11 @@ def blow_up_advice(scene: Scene) -> str:
     if need is not None and need > scene.simulation.simulation_steps:
         return f"try simulation_steps >= {need}, or integrator implicit_euler or xpbd"
     return "try more simulation_steps, or integrator implicit_euler or xpbd"
+
+
+def _warm() -> None:
+    state = np.zeros((3, 4))
+    _frame_sums(state, state, np.zeros(1, dtype=np.int32), np.zeros((4, 3)).T)
+
+
+on_warm("1 blow-up guard", _warm)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import time
 
 
-from .frame import PASS_COLLIDERS, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF
+from .solvers.frame import PASS_COLLIDERS, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF
 
 PASSES = ("forces+integrate", "self-collision", "colliders", "provot")
 
@@ -42,9 +42,9 @@ class Profiler:
             out["self-collision"] = "simulation.self_collision is false"
         if sim.n_colliders == 0:
             out["colliders"] = "scene has no sphere, plane, capsule, box or mesh"
-        if sim._kernel_args[6] is None:  # (st, spec, grid, col, mov, mesh, wind, pins)
+        if sim._kernel_args.wind is None:
             out["wind"] = "scene has no wind (or only still air)"
-        if sim._kernel_args[7] is None:
+        if sim._kernel_args.pins is None:
             out["moving pins"] = "cloth has no pin_motion"
         if sim._stretch_limit <= 0:
             out["provot"] = "simulation.max_stretch is null"

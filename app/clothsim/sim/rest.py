@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .jit import EXACT
+from ..jit import EXACT
+from ..jit.compile import on_warm
 
 
 @njit(**EXACT)
@@ -42,3 +43,11 @@ class RestDetector:
         self._previous[...] = state
         self._quiet = self._quiet + 1 if self.last_displacement < self.tolerance else 0
         return self._quiet >= self.frames
+
+
+def _warm() -> None:
+    state = np.zeros((3, 4))
+    max_displacement(state, state)
+
+
+on_warm("2 rest detector", _warm)

@@ -11,16 +11,16 @@ from ..scene import Scene, check_field
 from ..validate import At, check, integer
 from ..wind import WINDS, wind_rows
 from . import team
-from .collide import SURFACE_OFFSET
-from .frame import PASS_ALL, kernel_addresses, run_substeps
-from .aero import incidence, triangles
-from .jit import CHUNKS
-from .pinmotion import move_pins
-from .moving import pack_motion, top_speed
-from .shapes import collider_rows
-from .meshgrid import mesh_group
-from .selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
-from .state import ClothState, Colliders, GridHash, PinMotion, SpecHash, Wind
+from .passes.colliders.primitives import SURFACE_OFFSET
+from .solvers.frame import PASS_ALL, kernel_addresses, run_substeps
+from .passes.wind import incidence, triangles
+from ..jit import CHUNKS
+from .passes.pins import move_pins
+from .passes.colliders.moving import pack_motion, top_speed
+from .passes.colliders.shapes import collider_rows
+from .passes.colliders.meshgrid import mesh_group
+from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
+from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash, Wind
 
 _SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID}
 _FRAMES = integer(ge=0)
@@ -235,7 +235,7 @@ class Simulation:
         # to look it up takes ~0.36 ms: a third of a frame, if done every frame)
         self._member_at = 0
 
-    def _pack(self) -> tuple:
+    def _pack(self) -> Plan:
         """The frame kernel's state groups (:mod:`clothsim.sim.state`), ``None`` for a pass the
         scene does not use."""
         cloth, sim = self.scene.cloth, self.scene.simulation
@@ -251,8 +251,7 @@ class Simulation:
             spec = SpecHash(self._cell, self._keys, self._slots, self._table, self._order, ~self.pinned, busy, xs, ys,
                             zs, ks, cum, counted, tally, 2.0 * cloth.thickness, steps, 0)
         elif self._self_mode == MODE_GRID:
-            grid = GridHash(self.free, cloth.thickness, steps, self._cell, self._keys, self._slots, self._table,
-                            self._order)
+            grid = self.self_hash()
         if self._meshes is not None:
             self._meshes.clock[1] = dt
         if self.n_colliders > 0:
@@ -260,7 +259,14 @@ class Simulation:
             col = Colliders(self.free, self._spheres, self._planes, SURFACE_OFFSET, self._box, self._sphere_on,
                             self._plane_on, self._boxes, margin, self._capsules, self._cuboids, self._capsule_on,
                             self._cuboid_on)
-        return st, spec, grid, col, self._motion, self._meshes, self._wind_group(), self._pin_group()
+        return Plan(st, spec, grid, col, self._motion, self._meshes, self._wind_group(), self._pin_group())
+
+    def self_hash(self) -> GridHash:
+        """The self-collision hash's arrays and constants (the grid's group; the integrators'
+        corrections use it for either mode)."""
+        cloth = self.scene.cloth
+        return GridHash(self.free, cloth.thickness, self.scene.simulation.simulation_steps, self._cell, self._keys,
+                        self._slots, self._table, self._order)
 
     def _wind_group(self) -> Wind | None:
         rows, modes = wind_rows(self.scene.winds)
@@ -286,7 +292,7 @@ class Simulation:
     def _place_pins(self) -> None:
         """At the start, the whole cloth moved by the pins' offset at time 0, at rest: the pins are
         then at rest + offset(0) with no jump in the first substep."""
-        pm = self._kernel_args[7]
+        pm = self._kernel_args.pins
         if pm is not None:
             offset = np.empty(3)
             move_pins(self._pos, self._last, pm, self.time, offset)
@@ -360,13 +366,13 @@ class Simulation:
         gave the frame up half-way (the state must be restored)."""
         self._start_clock(substep)
         if not self._member_at:
-            self._member_at, repel, collide = kernel_addresses(*self._kernel_args, self._sync)
-            st, spec, grid, col, mov, mesh, *rest = self._kernel_args
-            if spec is not None:
-                spec = spec._replace(repel=repel)
-            if mesh is not None:
-                mesh = mesh._replace(collide=collide)
-            self._kernel_args = (st, spec, grid, col, mov, mesh, *rest)
+            self._member_at, repel, collide = kernel_addresses(self._kernel_args, self._sync)
+            plan = self._kernel_args
+            if plan.spec is not None:
+                plan = plan._replace(spec=plan.spec._replace(repel=repel))
+            if plan.mesh is not None:
+                plan = plan._replace(mesh=plan.mesh._replace(collide=collide))
+            self._kernel_args = plan
         self.colliders_skipped += run_substeps(steps, *self._kernel_args, self._sync, size, passes, self._member_at)
         if passes == PASS_ALL:  # pass by pass (the profiler), the caller counts each substep once its passes ran
             self._clock[1] += steps
@@ -380,7 +386,7 @@ class Simulation:
         state before them), the fast path may use the thread team and, if the team gives up
         half-way, restores ``saved`` and runs alone."""
         if not self.uses_spec_path:
-            from .integrators import advance
+            from .solvers import advance
 
             self._start_clock(substep)
             advance(self, steps)

@@ -1,4 +1,4 @@
-"""What the frame kernel (:func:`clothsim.sim.frame.run_substeps`) is given: named tuples of flat
+"""What the frame kernel (:func:`clothsim.sim.solvers.frame.run_substeps`) is given: named tuples of flat
 arrays and constants, one for the cloth and one per optional pass.
 
 A pass the scene does not use is passed as ``None``; Numba compiles the kernel separately for
@@ -58,7 +58,7 @@ class SpecHash(NamedTuple):
     tally: np.ndarray
     dist: float
     sim_steps: int
-    #: address of the query kernel (see :func:`clothsim.sim.frame.kernel_addresses`); 0 until known
+    #: address of the query kernel (see :func:`clothsim.sim.solvers.frame.kernel_addresses`); 0 until known
     repel: int
 
 
@@ -79,10 +79,10 @@ class Colliders(NamedTuple):
     """Every collider, kind by kind, with the bounding boxes of the skip test.
 
     Spheres and planes are always arrays (possibly empty: the course's kernels); capsules and
-    boxes (``cuboids``, rows of :mod:`clothsim.sim.shapes`) with their reach flags are ``None``
+    boxes (``cuboids``, rows of :mod:`clothsim.sim.passes.colliders.shapes`) with their reach flags are ``None``
     when the scene has none, so their code is pruned before typing. ``boxes`` are the members'
     bounding boxes of the cloth. The tracks of moving colliders are a group of their own
-    (:class:`clothsim.sim.moving.Motion`): a parallel loop cannot take a tuple nested in a tuple.
+    (:class:`clothsim.sim.passes.colliders.moving.Motion`): a parallel loop cannot take a tuple nested in a tuple.
     """
 
     free: np.ndarray
@@ -101,7 +101,7 @@ class Colliders(NamedTuple):
 
 
 class Wind(NamedTuple):
-    """The winds (:mod:`clothsim.sim.aero`): their rows and gust modes (:func:`clothsim.wind.wind_rows`),
+    """The winds (:mod:`clothsim.sim.passes.wind`): their rows and gust modes (:func:`clothsim.wind.wind_rows`),
     the mesh's triangles (3, T), each point's triangles (``start`` (N + 1,), ``incident``), the
     per-triangle force buffer (3, T) and work space (12, T), 1/dt, dt and the clock (see
     :class:`PinMotion`)."""
@@ -119,7 +119,7 @@ class Wind(NamedTuple):
 
 
 class PinMotion(NamedTuple):
-    """Moving pins (:mod:`clothsim.sim.pinmotion`): the pinned points, their rest positions (3, P),
+    """Moving pins (:mod:`clothsim.sim.passes.pins`): the pinned points, their rest positions (3, P),
     the offset's track (:class:`clothsim.motion.Track` arrays), the substep and the clock: (time at
     the last re-plan, substeps since), so substep s of a call starts at clock[0] + (clock[1] + s) dt."""
 
@@ -130,3 +130,32 @@ class PinMotion(NamedTuple):
     velocity: np.ndarray
     dt: float
     clock: np.ndarray
+
+
+class Corrections(NamedTuple):
+    """The position corrections every integrator but the fast path runs after its advance
+    (:func:`clothsim.sim.passes.corrections.corrections`): the pinned mask, the self-collision mode
+    (0 = off) with its hash (a :class:`GridHash`, whichever the mode), Provot's limit (<= 0 = off),
+    and the colliders, moving-collider and mesh groups (each None when the scene has none)."""
+
+    pinned: np.ndarray
+    self_mode: int
+    hash: GridHash
+    stretch_limit: float
+    col: tuple | None
+    mov: tuple | None
+    mesh: tuple | None
+
+
+class Plan(NamedTuple):
+    """Every group of a scene's compiled plan, in the frame kernel's argument order; a pass the
+    scene does not use is None (see the module's notes)."""
+
+    st: ClothState
+    spec: SpecHash | None
+    grid: GridHash | None
+    col: Colliders | None
+    mov: tuple | None
+    mesh: tuple | None
+    wind: Wind | None
+    pins: PinMotion | None

@@ -21,12 +21,11 @@ frame started from and runs it again alone. Waits spin, then yield the core, so 
 more threads than cores (many runs side by side) is slowed, not stalled.
 
 Results never depend on the team size: every pass is cut into the same work items (see
-:data:`clothsim.sim.jit.CHUNKS`) whoever runs them.
+:data:`clothsim.jit.CHUNKS`) whoever runs them.
 """
 
 from __future__ import annotations
 
-import os
 import platform
 import time
 
@@ -37,7 +36,8 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from .jit import EXACT
+from ..jit import EXACT
+from ..jit.compile import available_cores
 
 # Slots of the ``sync`` array (int64); 8 apart keeps the counters on their own cache line.
 ARRIVED = 0   # members at the current barrier
@@ -68,20 +68,12 @@ def new_sync() -> np.ndarray:
     return np.zeros(SYNC_SIZE, dtype=np.int64)
 
 
-def available_cores() -> int:
-    """Cores this process may run on (its CPU affinity, else the machine's count)."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
-
-
 def team_size() -> int:
     """Members for the next frame: Numba's thread count (``NUMBA_NUM_THREADS``), capped at the
-    useful size. A pass has :data:`~clothsim.sim.jit.CHUNKS` work items, so more members than
+    useful size. A pass has :data:`~clothsim.jit.CHUNKS` work items, so more members than
     that only wait at every barrier; more members than cores take turns on a core while the
     rest spin."""
-    from .jit import CHUNKS
+    from ..jit import CHUNKS
 
     return max(1, min(int(numba.get_num_threads()), CHUNKS, available_cores()))
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 from numba import njit
 
 from ..motion import position_at
-from .jit import EXACT
+from ..jit import EXACT
 
 IEEE = {**EXACT, "fastmath": False}
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .jit import KERNEL
+from ....jit import KERNEL
 
 # The spec's SURFACE_OFFSET: how far above a plane a corrected point is put.
 SURFACE_OFFSET = 0.0001

@@ -22,8 +22,8 @@ import numpy as np
 from numba import njit, prange
 from numba.cpython.unsafe.numbers import trailing_zeros
 
-from .jit import CHUNKS, EXACT, KERNEL, PARALLEL
-from .team import share
+from ...jit import CHUNKS, EXACT, KERNEL, PARALLEL
+from ..team import share
 
 MODE_SPEC = 1
 MODE_GRID = 2

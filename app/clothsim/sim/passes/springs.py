@@ -20,8 +20,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .jit import CHUNKS, KERNEL, PARALLEL
-from .team import share
+from ...jit import CHUNKS, KERNEL, PARALLEL
+from ..team import share
 
 
 

@@ -13,10 +13,10 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .jit import CHUNKS, KERNEL
-from .team import share
-from .track import IEEE
-from .track import track_at as offset_at
+from ...jit import CHUNKS, KERNEL
+from ..team import share
+from ..track import IEEE
+from ..track import track_at as offset_at
 
 
 @njit(inline="always", **KERNEL)

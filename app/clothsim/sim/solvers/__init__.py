@@ -1,10 +1,12 @@
-"""Every run other than the spec fast path: integrator and damping mode chosen per scene.
+"""The integrators: every run other than the spec fast path, integrator and damping mode chosen
+per scene. Each is an advance rule in a module of its own, run by the one substep of
+:mod:`.substep`.
 
 ``advance(sim, steps)`` runs ``steps`` substeps in the spec's order (forces -> integrate ->
 self-collision -> colliders -> Provot) with the integrator of ``sim.scene.simulation``:
 
 * ``verlet``: position Verlet; reached here only with ``damping_mode == "rate"``, where it gets
-  the second-order start and the consistent damping discretisation (see :mod:`.explicit`).
+  the second-order start and the consistent damping discretisation (see :mod:`.verlet`).
 * ``symplectic_euler``: kick-drift with an explicit velocity (first order).
 * ``implicit_euler``: linearised backward Euler, CG solve (see :mod:`.implicit`).
 * ``xpbd``: compliant distance constraints (see :mod:`.xpbd`).
@@ -24,11 +26,14 @@ from typing import Any
 import numba
 import numpy as np
 
-from .explicit import run_symplectic, run_verlet_rate, verlet_start
-from .forces import accumulate_forces
-from .implicit import CG_MAX_ITERATIONS, CG_TOLERANCE, run_implicit
-from .passes import has_corrections
-from .xpbd import XPBD_ITERATIONS, run_xpbd
+from ..passes.springs import accumulate_forces
+from ..passes.corrections import has_corrections
+from ..state import Corrections
+from .implicit import CG_MAX_ITERATIONS, CG_TOLERANCE, Implicit
+from .substep import Step, integrate_substeps
+from .symplectic import Symplectic
+from .verlet import VerletRate, verlet_start
+from .xpbd import XPBD_ITERATIONS, Xpbd
 
 #: Points from which these integrators split their passes over Numba's threads. Each pass is a
 #: parallel loop of its own, a fork and join per pass and substep; on the 2-core development
@@ -101,10 +106,10 @@ class IntegratorState:
         return new
 
 
-def post_args(sim: Any) -> tuple:
-    """The correction passes' arguments, packed for :func:`clothsim.sim.passes.corrections`."""
-    return (sim.pinned, sim._self_mode, sim.scene.cloth.thickness, sim.scene.simulation.simulation_steps,
-            sim._cell, sim._keys, sim._slots, sim._table, sim._order, sim._stretch_limit, *sim._kernel_args[3:6])
+def post_args(sim: Any) -> Corrections:
+    """The correction passes' group (:class:`~clothsim.sim.state.Corrections`)."""
+    plan = sim._kernel_args
+    return Corrections(sim.pinned, sim._self_mode, sim.self_hash(), sim._stretch_limit, plan.col, plan.mov, plan.mesh)
 
 
 def state_of(sim: Any) -> IntegratorState:
@@ -140,29 +145,30 @@ def _advance(sim: Any, steps: int) -> None:
     fix = has_corrections(post)
     f, phi, c = damping_factors(sim)
     dt = sim.dt
-    wind, pins = sim._kernel_args[6], sim._kernel_args[7]  # (st, spec, grid, col, mov, mesh, wind, pins)
+    plan = sim._kernel_args
+    verlet = symplectic = implicit = xpbd = None
     if name == "verlet":
         if not st.started:
             accumulate_forces(sim._pos, sim._forces, sim._stream, sim.mass, sim._gravity)
             verlet_start(sim._pos, sim._last, st.vel, sim._forces, sim.free, 1.0 / sim.mass, dt, c)
             st.started = True
-        sim.colliders_skipped += run_verlet_rate(steps, sim._pos, sim._last, sim._forces, sim.free, sim._blocks,
-                                                 sim._stream, sim._rest, sim.nw, sim.mass,
-                                                 sim._gravity, dt, f, phi, post, wind, pins)
+        verlet = VerletRate(1.0 / sim.mass)
+        fix = False  # Verlet keeps no velocity: (x - x_last) / dt is its velocity
     elif name == "symplectic_euler":
-        sim.colliders_skipped += run_symplectic(steps, sim._pos, sim._last, st.vel, sim._forces, sim.free,
-                                                sim._blocks, sim._stream, sim._rest, sim.nw,
-                                                sim.mass, sim._gravity, dt, f, phi, post, fix, wind, pins)
+        symplectic = Symplectic(1.0 / sim.mass)
     elif name == "implicit_euler":
         # Rate damping goes into the implicit system; spec damping scales the solved velocity.
         keep_after = 1.0 if c > 0.0 else f
-        st.cg_iterations += run_implicit(steps, sim._pos, sim._last, st.vel, sim._forces, sim.free, st.mask,
-                                         sim._blocks, sim._stream, sim._rest, sim.nw, st.si,
-                                         st.sj, st.kspr, st.jac, st.scratch, sim.mass, sim._gravity, dt, c,
-                                         keep_after, CG_TOLERANCE, CG_MAX_ITERATIONS, post, fix, wind, pins)
+        implicit = Implicit(st.mask, st.si, st.sj, st.kspr, st.jac, st.scratch, c, keep_after, CG_TOLERANCE,
+                            CG_MAX_ITERATIONS)
     elif name == "xpbd":
-        sim.colliders_skipped += run_xpbd(steps, sim._pos, sim._last, st.vel, sim.free, st.inv_mass, sim._blocks,
-                                          sim._rest, sim.nw, st.si, st.sj, st.kspr, st.lam, sim._gravity,
-                                          dt, f, phi, st.iterations, post, sim._forces, wind, pins)
+        xpbd = Xpbd(st.inv_mass, st.si, st.sj, st.kspr, st.lam, st.iterations)
+        fix = True  # its positions are the solution: velocities always follow them
     else:  # the scene validator only admits the four names above
         raise ValueError(f"unknown integrator {name!r}")
+    step = Step(sim._pos, sim._last, st.vel, sim._forces, sim.free, sim._blocks, sim._rest, sim.nw, sim.mass,
+                sim._gravity, dt, f, phi, fix)
+    skipped, iterations = integrate_substeps(steps, step, sim._stream, post, plan.wind, plan.pins, verlet,
+                                             symplectic, implicit, xpbd)
+    sim.colliders_skipped += skipped
+    st.cg_iterations += iterations

@@ -21,7 +21,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..scene import Scene
+from ....scene import Scene
 
 #: Columns of ``MeshGroup.info`` (float64) and ``MeshGroup.dims`` (int64), one row per mesh.
 INFO_LO, INFO_HI, INFO_INV_H, INFO_FRICTION = 0, 3, 6, 7
@@ -48,7 +48,7 @@ class MeshGroup(NamedTuple):
     velocity: np.ndarray  # (M, 3) translation velocity after the last keyframe
     clock: np.ndarray  # (3,) base time, substep length, substeps from the base to this call's start
     thickness: float
-    #: address of the mesh pass compiled for this group (see :func:`clothsim.sim.frame.kernel_addresses`); 0 until known
+    #: address of the mesh pass compiled for this group (see :func:`clothsim.sim.solvers.frame.kernel_addresses`); 0 until known
     collide: int = 0
 
 

@@ -1,6 +1,6 @@
 """Shapes the project makes itself, written as OBJ text: the bundled ``mesh`` scene's torus, and a box.
 
-``python -m clothsim.shapes`` rewrites ``scenes/torus.obj`` (the file shipped with the ``mesh``
+``python -m clothsim.objshapes`` rewrites ``scenes/torus.obj`` (the file shipped with the ``mesh``
 scene); the test suite checks that the shipped file is exactly what this module writes.
 """
 
@@ -34,7 +34,7 @@ def torus_obj(ring: float, tube: float, around: int, sides: int) -> str:
         for j in range(sides):
             i1, j1 = (i + 1) % around, (j + 1) % sides
             faces.append((i * sides + j, i * sides + j1, i1 * sides + j1, i1 * sides + j))
-    return _obj(f"torus: ring radius {ring}, tube radius {tube}, {around} x {sides} quads (clothsim.shapes)",
+    return _obj(f"torus: ring radius {ring}, tube radius {tube}, {around} x {sides} quads (clothsim.objshapes)",
                 verts, faces)
 
 
@@ -46,7 +46,7 @@ def box_obj(hx: float = 0.5, hy: float = 0.5, hz: float = 0.5, *, drop_top: bool
     faces = [(0, 2, 3, 1), (4, 5, 7, 6), (0, 1, 5, 4), (0, 4, 6, 2), (1, 3, 7, 5)]
     if not drop_top:
         faces.append((2, 6, 7, 3))
-    return _obj(f"box {2 * hx} x {2 * hy} x {2 * hz}{' without its top' if drop_top else ''} (clothsim.shapes)",
+    return _obj(f"box {2 * hx} x {2 * hy} x {2 * hz}{' without its top' if drop_top else ''} (clothsim.objshapes)",
                 verts, faces)
 
 

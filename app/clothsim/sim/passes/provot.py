@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .jit import CHUNKS, KERNEL, PARALLEL
+from ...jit import CHUNKS, KERNEL, PARALLEL
 
 
 @njit(inline="always", **KERNEL)

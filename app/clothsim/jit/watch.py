@@ -1,7 +1,7 @@
 """Watching Numba compile: a record of each kernel compiled and for how long
 (:class:`CompileRecorder`), and the first-run notice (:class:`CompileNotice`).
 
-Kept apart from :mod:`clothsim.compiling` because it needs Numba at import, and the command line
+Kept apart from :mod:`clothsim.cli.compile` because it needs Numba at import, and the command line
 loads that module to build its parser: a command that runs no kernel never imports Numba.
 """
 

@@ -1,7 +1,7 @@
 """Capsule and oriented-box colliders, batched per kind, with friction and moving poses.
 
 Rows (float64), one per collider, each ending with ``carry``: how far the collider moved during
-the current substep (zero for a static one; written by :mod:`clothsim.sim.moving`):
+the current substep (zero for a static one; written by :mod:`clothsim.sim.passes.colliders.moving`):
 
 * capsules (C, 11): ax ay az, bx by bz, radius, friction, carry xyz;
 * cuboids (B, 19): cx cy cz, hx hy hz (half extents), R (9, row-major; column k is the box's
@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from .jit import KERNEL
+from ....jit import KERNEL
 
 #: Columns of a capsule row and of a box row (see the module's docstring).
 CAPSULE_COLUMNS = 11

@@ -1,4 +1,4 @@
-"""Collisions with triangle meshes (:class:`~clothsim.sim.meshgrid.MeshGroup`), one point at a time.
+"""Collisions with triangle meshes (:class:`~clothsim.sim.passes.colliders.meshgrid.MeshGroup`), one point at a time.
 
 Each substep a mesh has a translation before and after it (its motion track at the substep's two
 ends); a point is handled in the mesh's own frame, where its last position ``l`` and its position
@@ -33,11 +33,11 @@ import math
 import numpy as np
 from numba import njit
 
-from .jit import CHUNKS, EXACT
+from ....jit import CHUNKS, EXACT
 from .meshgrid import DIMS_CELL0, DIMS_CLOSED, DIMS_K0, DIMS_K1, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
     INFO_HI, INFO_INV_H, INFO_LO
-from .team import share
-from .track import track_at as _position_at
+from ...team import share
+from ...track import track_at as _position_at
 
 # closest-point features
 FACE, VERTEX_A, VERTEX_B, VERTEX_C, EDGE_AB, EDGE_BC, EDGE_CA = 0, 1, 2, 3, 4, 5, 6

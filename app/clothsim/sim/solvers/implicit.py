@@ -9,15 +9,30 @@ applies. Pinned points are removed by masking (their dv is 0). Jacobi preconditi
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from .jit import KERNEL, EXACT
-from .explicit import velocities_from_positions
-from .aero import add_wind
-from .forces import accumulate_forces
-from .passes import corrections
-from .pinmotion import move_pins, pin_velocities, substep_time
+from ...jit import KERNEL
+
+
+class Implicit(NamedTuple):
+    """The implicit Euler rule's arrays: the free-point mask, the springs (ends, stiffness), the
+    Jacobian blocks (6, S) and the CG work space (7, 3, N), the damping rate ``c``, the factor on
+    the solved velocity (spec damping) and the CG stopping rule."""
+
+    mask: np.ndarray
+    si: np.ndarray
+    sj: np.ndarray
+    kspr: np.ndarray
+    jac: np.ndarray
+    scratch: np.ndarray
+    c: float
+    keep_after: float
+    tol: float
+    max_iter: int
+
 
 # Relative residual at which CG stops, and its iteration cap (a stiff run hitting the cap is
 # still damped, not unstable: the partial solve is a descent step of the SPD system).
@@ -168,29 +183,3 @@ def implicit_update(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: 
             last[ax, q] = pos[ax, q]
             pos[ax, q] += dt * v
     return its
-
-
-@njit(**EXACT)
-def run_implicit(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray,
-                 free: np.ndarray, mask: np.ndarray, blocks: np.ndarray, stream: tuple, rest: np.ndarray,
-                 nw: int, si: np.ndarray, sj: np.ndarray, kspr: np.ndarray, jac: np.ndarray,
-                 scratch: np.ndarray, mass: float, gravity: np.ndarray, dt: float, c: float, keep_after: float,
-                 tol: float, max_iter: int, post: tuple, fix_velocity: bool, wind: tuple | None,
-                 pins: tuple | None) -> int:
-    """``steps`` implicit substeps plus the shared corrections; returns total CG iterations. The
-    wind's force is taken explicitly (at the start of the substep)."""
-    total = 0
-    offset = np.empty(3)
-    for substep in range(steps):
-        accumulate_forces(pos, forces, stream, mass, gravity)
-        if wind is not None:
-            add_wind(pos, last, forces, wind, substep_time(wind.clock, substep, wind.dt))
-        total += implicit_update(pos, last, vel, forces, free, mask, si, sj, rest, kspr, jac, scratch, mass, dt,
-                                 c, keep_after, tol, max_iter)
-        if pins is not None:
-            move_pins(pos, last, pins, substep_time(pins.clock, substep + 1, pins.dt), offset)
-            pin_velocities(pos, last, vel, pins, dt)
-        corrections(pos, last, free, blocks, rest, nw, post, substep)
-        if fix_velocity:
-            velocities_from_positions(pos, last, vel, free, dt)
-    return total

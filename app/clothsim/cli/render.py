@@ -14,8 +14,8 @@ from typing import Any
 
 from .. import validate as V
 from ..errors import ClothsimError
+from ..render.settings import SHADERS, TERMS, RenderSettings, parse_size
 from ..scene import MAX_FPS, MIN_FPS
-from .settings import SHADERS, TERMS, RenderSettings, parse_size
 
 DEFAULT_SCENE = "pinned2"
 DEFAULT_FRAMES = 90
@@ -261,7 +261,7 @@ def _size_label(args: argparse.Namespace, scene: Any) -> str:
 
 def _renderer(size: tuple[int, int], samples: int, size_label: str, **kwargs: Any) -> Any:
     """A Renderer; an image too large for the driver or the memory names what set its size."""
-    from .renderer import Renderer, RenderSizeError
+    from ..render.renderer import Renderer, RenderSizeError
 
     try:
         return Renderer(*size, samples=samples, **kwargs)
@@ -282,7 +282,7 @@ def _progress(total: int, desc: str) -> Any:
 # -- info ----------------------------------------------------------------------------------------
 def run_info(args: argparse.Namespace) -> int:
     """``clothsim info``: what OpenGL the renderer gets."""
-    from .context import create_context, describe
+    from ..render.context import create_context, describe
 
     ctx = create_context()
     try:
@@ -302,7 +302,7 @@ def run_bench_render(args: argparse.Namespace) -> int:
     """``clothsim bench render``: per-shader frames per second and a frame's time by stage."""
     from ..scene import load_scene
     from ..sim.simulation import Simulation
-    from .renderer import STAGES
+    from ..render.renderer import STAGES
 
     try:
         width, height = parse_size(args.size)

@@ -8,8 +8,8 @@ import warnings
 from collections.abc import Sequence
 from typing import NoReturn
 
-from . import __version__
-from .errors import ClothsimError
+from ..version import __version__
+from ..errors import ClothsimError
 
 EPILOG = """\
 scenes: a path to a course scene file (JSON with cloth/sphere/plane), or the bare name (no / and
@@ -49,19 +49,19 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"clothsim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    from .commands import add_simulate_parser
+    from ..commands import add_simulate_parser
 
     add_simulate_parser(sub)
 
-    from .exporters.commands import add_parser as add_export_parser
+    from ..exporters.commands import add_parser as add_export_parser
 
     add_export_parser(sub)
 
-    from .sweeps.commands import add_parser as add_sweep_parser
+    from ..sweeps.commands import add_parser as add_sweep_parser
 
     add_sweep_parser(sub)
 
-    from .serve.command import add_parser as add_serve_parser
+    from ..serve.command import add_parser as add_serve_parser
 
     add_serve_parser(sub)
     bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling, sweep, colliders, serve",
@@ -69,13 +69,13 @@ def build_parser() -> argparse.ArgumentParser:
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
     bench.set_defaults(func=lambda args: (bench.print_help(), 2)[1])
 
-    from . import compiling
-    from .bench import accuracy, scaling, speed, stability
-    from .bench import colliders as bench_colliders
-    from .bench import compile as bench_compile
-    from .bench import serve as bench_serve
-    from .bench import sweep as bench_sweep
-    from .render.commands import add_parsers as add_render_parsers
+    from . import compile as compiling
+    from ..bench import accuracy, scaling, speed, stability
+    from ..bench import colliders as bench_colliders
+    from ..bench import compile as bench_compile
+    from ..bench import serve as bench_serve
+    from ..bench import sweep as bench_sweep
+    from .render import add_parsers as add_render_parsers
 
     speed.add_parser(bench_sub)
     add_render_parsers(sub, bench_sub)
@@ -94,7 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help()
         return 2
     if getattr(args, "kernels", True):  # a command that runs no kernel here does not load Numba
-        from .compile_watch import install_notice
+        from ..jit.watch import install_notice
 
         install_notice()
     try:

@@ -9,14 +9,25 @@ does not depend on the iteration count or on dt (unlike plain PBD stiffness fact
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
-from .aero import add_wind
-from .explicit import velocities_from_positions
-from .jit import KERNEL, EXACT
-from .passes import corrections
-from .pinmotion import move_pins, substep_time
+from ...jit import KERNEL
+
+
+class Xpbd(NamedTuple):
+    """The XPBD rule's arrays: inverse masses ``w`` (0 for pinned points), the springs (ends,
+    stiffness), their multipliers and the Gauss-Seidel passes per substep."""
+
+    w: np.ndarray
+    si: np.ndarray
+    sj: np.ndarray
+    kspr: np.ndarray
+    lam: np.ndarray
+    iterations: int
+
 
 # Gauss-Seidel passes over all springs per substep.
 XPBD_ITERATIONS = 4
@@ -77,26 +88,3 @@ def solve_constraints(pos: np.ndarray, w: np.ndarray, si: np.ndarray, sj: np.nda
             pos[0, b] += wb * ex
             pos[1, b] += wb * ey
             pos[2, b] += wb * ez
-
-
-@njit(**EXACT)
-def run_xpbd(steps: int, pos: np.ndarray, last: np.ndarray, vel: np.ndarray, free: np.ndarray, w: np.ndarray,
-             blocks: np.ndarray, rest: np.ndarray, nw: int, si: np.ndarray, sj: np.ndarray, kspr: np.ndarray,
-             lam: np.ndarray, gravity: np.ndarray, dt: float, f: float, phi: float, iterations: int,
-             post: tuple, forces: np.ndarray, wind: tuple | None, pins: tuple | None) -> int:
-    """``steps`` XPBD substeps plus the shared corrections; returns colliders skipped. The wind's
-    force (into ``forces``) kicks the velocities before the prediction."""
-    skipped = 0
-    offset = np.empty(3)
-    for substep in range(steps):
-        if wind is not None:
-            forces[:, :] = 0.0
-            add_wind(pos, last, forces, wind, substep_time(wind.clock, substep, wind.dt))
-            kick(vel, forces, free, w, dt * phi)
-        predict(pos, last, vel, free, gravity, dt, f, phi)
-        if pins is not None:
-            move_pins(pos, last, pins, substep_time(pins.clock, substep + 1, pins.dt), offset)
-        solve_constraints(pos, w, si, sj, rest, kspr, lam, dt, iterations)
-        skipped += corrections(pos, last, free, blocks, rest, nw, post, substep)
-        velocities_from_positions(pos, last, vel, free, dt)
-    return skipped

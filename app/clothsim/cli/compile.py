@@ -1,6 +1,6 @@
-"""The Numba kernels' compile: :func:`compile_all` (``clothsim compile``) to do it ahead of time,
-and a cold start's second process. The notice and the record of compiles are in
-:mod:`clothsim.compile_watch`.
+"""``clothsim compile``: every Numba kernel compiled ahead of time (:func:`compile_all`), and
+:func:`record_command` for ``clothsim bench compile``. A cold start's second process is
+:mod:`clothsim.jit.compile`; the notice and the record of compiles are :mod:`clothsim.jit.watch`.
 
 Kernels are compiled for this CPU the first time a scene needs them and cached on disk (next to
 the installed package, or in Numba's user-wide cache when that folder is read-only). A warm
@@ -10,89 +10,12 @@ cache compiles nothing, and then nothing here prints anything.
 from __future__ import annotations
 
 import json
-import os
-import pickle
-import subprocess
-import sys
 import time
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from .compile_watch import Compiled
-
-# ---------------------------------------------------------------------------------------------
-# A cold start on two cores
-
-#: Set to 1 to compile everything in this process (no second process on a cold start).
-JOBS_VARIABLE = "CLOTHSIM_COMPILE_JOBS"
-_CHILD = ("import importlib, pickle, sys; module, name, argtypes = pickle.load(sys.stdin.buffer); "
-          "getattr(importlib.import_module(module), name).compile(argtypes)")
-
-
-def side_kernels() -> None:
-    """Compile (or load) the small kernels every command meets after its first frame: the blow-up
-    guard, the rest detector and the renderer's mesh kernel, with the argument types they get."""
-    import numpy as np
-
-    from .render import mesh
-    from .sim.guard import _frame_sums
-    from .sim.rest import max_displacement
-
-    state = np.zeros((3, 4))
-    _frame_sums(state, state, np.zeros(1, dtype=np.int32), np.zeros((4, 3)).T)
-    max_displacement(state, state)
-    mesh.update_cloth_vertices(np.zeros((4, 3)), 2, 2, True, np.zeros((4, mesh.CLOTH_FLOATS), dtype=np.float32))
-
-
-def _is_cached(dispatcher: Any, argtypes: tuple) -> bool:
-    if argtypes in dispatcher.overloads:
-        return True
-    cache = getattr(dispatcher, "_cache", None)
-    try:
-        return cache is not None and cache.load_overload(argtypes, dispatcher.targetctx) is not None
-    except Exception:  # noqa: BLE001 - an unreadable cache entry is a miss
-        return False
-
-
-def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], None]) -> None:
-    """Compile ``dispatcher`` for ``argtypes`` into the on-disk cache in a second process while
-    ``meanwhile()`` compiles the rest here; the caller then loads it from the cache.
-
-    Numba compiles one function at a time per process (a global lock), so a cold start on two
-    cores otherwise leaves one idle. (A fork of this process, which skips the 0.7 s import, was
-    slower: 19.7-20.8 s against 16.2-18.0 s for a cold ``simulate``, alternated; copy-on-write
-    faults of two processes both busy in Python, presumably.) The wait shows as the kernel's own compile (the notice and
-    ``clothsim bench compile`` see it so). With one core, with ``CLOTHSIM_COMPILE_JOBS=1``, when
-    the kernel is cached already, or when the second process fails, nothing is done here and the
-    caller's compile happens in this process as usual.
-    """
-    from numba.core import event
-
-    from .sim.team import available_cores
-
-    if os.environ.get(JOBS_VARIABLE) == "1" or available_cores() < 2 or _is_cached(dispatcher, argtypes):
-        meanwhile()
-        return
-    func = dispatcher.py_func
-    try:
-        child = subprocess.Popen([sys.executable, "-c", _CHILD], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
-                                 stderr=subprocess.DEVNULL)
-        child.stdin.write(pickle.dumps((func.__module__, func.__name__, argtypes)))
-        child.stdin.close()
-    except OSError:
-        meanwhile()
-        return
-    try:
-        meanwhile()
-        with event.trigger_event("numba:compile", data={"dispatcher": dispatcher, "args": argtypes,
-                                                        "return_type": None}):
-            child.wait()
-    finally:
-        if child.poll() is None:  # interrupted: the second process goes too
-            child.kill()
-            child.wait()
-
+    from ..jit.watch import Compiled
 
 # ---------------------------------------------------------------------------------------------
 # Ahead of time
@@ -100,8 +23,8 @@ def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], 
 
 def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet", damping_mode: str = "spec",
                 wind: bool = False, pin_motion: bool = False, meshes: bool = False):
-    from .resources import data_dir
-    from .scene import scene_from_dict
+    from ..resources import data_dir
+    from ..scene import scene_from_dict
 
     data: dict[str, Any] = {
         "cloth": {"width": 1, "height": 1, "num_width_points": 6, "num_height_points": 6, "thickness": 0.01,
@@ -126,7 +49,7 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
     colliders; wind and moving pins with the spec's self-collision, as the bundled ``flag`` uses),
     the plans of the bundled capsule, box, moving-collider and mesh scenes, each other integrator,
     the rest detector and the renderer's mesh kernel."""
-    from .sim import Simulation
+    from ..sim import Simulation
 
     def step(scene) -> Callable[[], None]:  # noqa: ANN001
         return lambda: Simulation(scene).step(1)
@@ -140,7 +63,7 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
     items.append(("verlet, rate damping", step(_tiny_scene("spec", True, "verlet", "rate"))))
     # the bundled scenes with capsules, boxes and moving colliders (each kind present or absent,
     # moving or not, is a plan of its own: these are the ones shipped)
-    from .scene import load_scene
+    from ..scene import load_scene
 
     items += [(f"frame kernel: bundled scene {name}", step(load_scene(name))) for name in ("capsule", "tablecloth",
                                                                                           "curtain")]
@@ -149,6 +72,16 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
 
     items.append(("guard, rest detector, render mesh", side_kernels))
     return items
+
+
+def side_kernels() -> None:
+    """Compile (or load) the small kernels every command meets after its first frame: the blow-up
+    guard, the rest detector and the renderer's mesh kernel, with the argument types they get."""
+    from ..jit.compile import warm_side_kernels
+    from ..render import mesh  # noqa: F401 - each of these registers its warm-up on import
+    from ..sim import guard, rest  # noqa: F401
+
+    warm_side_kernels()
 
 
 def compile_all() -> list[Compiled]:
@@ -160,11 +93,11 @@ def compile_all() -> list[Compiled]:
 def record_command(log_path: str, argv: Sequence[str]) -> int:
     """Run the CLI with ``argv`` and write what it compiled to ``log_path`` as JSON (used by
     ``clothsim bench compile`` in a fresh process)."""
-    from .cli import main
+    from . import main
 
     from numba.core import event
 
-    from .compile_watch import CompileRecorder
+    from ..jit.watch import CompileRecorder
 
     recorder = CompileRecorder()
     event.register("numba:compile", recorder)
@@ -206,7 +139,7 @@ def each_item():  # noqa: ANN201
     """Run :func:`work_items` one by one, yielding (label, seconds, compiles made) after each."""
     from numba.core import event
 
-    from .compile_watch import CompileRecorder
+    from ..jit.watch import CompileRecorder
 
     recorder = CompileRecorder()
     event.register("numba:compile", recorder)

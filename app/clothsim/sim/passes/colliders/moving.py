@@ -1,6 +1,6 @@
 """Moving colliders: each substep, every collider with a ``motion`` is put at its pose at the end of
 the substep, and its displacement over the substep (its *carry*) is recorded for the collision
-tests (see :mod:`clothsim.sim.shapes`).
+tests (see :mod:`clothsim.sim.passes.colliders.shapes`).
 
 All tracks are packed into one :class:`Motion` group of flat arrays (the kernels evaluate them with
 :func:`clothsim.motion.position_at`). A moving collider is a (kind, row) pair: the pose update
@@ -23,9 +23,9 @@ from typing import Any, NamedTuple
 import numpy as np
 from numba import njit
 
-from .jit import KERNEL
+from ....jit import KERNEL
 from .shapes import CAPSULE_CARRY, CUBOID_CARRY, samples
-from .track import track_at as position_at
+from ...track import track_at as position_at
 
 #: Kind numbers of a moving collider (the order of the scene's collider kinds).
 KIND_SPHERE, KIND_PLANE, KIND_CAPSULE, KIND_CUBOID = 0, 1, 2, 3

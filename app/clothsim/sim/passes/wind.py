@@ -28,7 +28,7 @@ of a sine: four modes at every triangle and every substep are 19,000 evaluations
 50 x 50 cloth, and the parabolas are plain arithmetic (a floor and three products) where ``sin``
 is a library call. Its range is exactly [-1, 1], so the field stays bounded.
 
-Work is split the frame kernel's way (:data:`~clothsim.sim.jit.CHUNKS` ranges): per triangle a
+Work is split the frame kernel's way (:data:`~clothsim.jit.CHUNKS` ranges): per triangle a
 force into ``tforce``, then per point the sum over its triangles in a fixed order, so the result
 does not depend on the number of threads.
 """
@@ -38,9 +38,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ..cloth import cloth_triangles
-from .jit import CHUNKS, KERNEL
-from .team import share
+from ...cloth import cloth_triangles
+from ...jit import CHUNKS, KERNEL
+from ..team import share
 
 
 @njit(inline="always", **KERNEL)

@@ -1,0 +1,43 @@
+"""The just-in-time layer: Numba options shared by every kernel of the package.
+
+This package imports nothing else of clothsim; every layer above may use it. Everything that
+touches Numba's private API is in :mod:`clothsim.jit.internals`.
+
+Fast-math lets LLVM contract and reassociate floating point (deterministic for a given build)
+but keeps NaN/inf semantics, so blow-up checks and infinite bounds stay meaningful.
+
+``error_model="numpy"`` matters as much: under Numba's default ("python") every float division
+carries a zero-divisor check that raises, and that branch stops LLVM from vectorising the loop
+(a plain sqrt-and-divide stream ran 4x slower with it). The kernels guard their divisors themselves.
+"""
+
+import os
+
+from .internals import install_package_stamp
+
+# Before any kernel is decorated: every module that defines one imports this one first.
+install_package_stamp()
+
+# Numba runs PARALLEL kernels on libgomp, whose idle workers spin 300,000 pause instructions
+# (about 10 ms on this machine's CPUs) before sleeping. A frame's parallel regions follow each
+# other microseconds apart, so a short spin keeps the same speed, while the default stole both
+# cores from whatever ran after a frame: llvmpipe rendered Blinn-Phong at 50 instead of 62 frames/s.
+# libgomp reads the variable when it loads (at the first parallel call); a user's value wins.
+os.environ.setdefault("GOMP_SPINCOUNT", "10000")
+
+FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+#: Options for kernels whose floating point may be reassociated.
+KERNEL = {"cache": True, "fastmath": FASTMATH, "error_model": "numpy"}
+
+#: Options for kernels that keep IEEE evaluation order (bit-exact closed forms, drivers).
+EXACT = {"cache": True, "error_model": "numpy"}
+
+#: KERNEL split over the cores with ``prange``; such kernels keep every output element a
+#: function of its own inputs, so results do not depend on the number of threads.
+PARALLEL = {**KERNEL, "parallel": True}
+
+#: Work items a PARALLEL kernel splits a pass into: enough for the cores to share the work evenly,
+#: few enough that each item is a long contiguous stream. Items are contiguous point ranges, in
+#: the same order in every pass, so a core keeps working on the points it touched last.
+CHUNKS = 8

@@ -1,0 +1,86 @@
+"""A cold start on two cores: compile one kernel in a second process while this one compiles the
+rest (:func:`compile_elsewhere`), and the small kernels every run meets after its first frame
+(:func:`warm_side_kernels`), which the layers above register here (:func:`on_warm`).
+
+Kernels are compiled for this CPU the first time a scene needs them and cached on disk (next to
+the installed package, or in Numba's user-wide cache when that folder is read-only). A warm
+cache compiles nothing.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import subprocess
+import sys
+from collections.abc import Callable
+from typing import Any
+
+from .internals import is_cached
+
+__all__ = ["JOBS_VARIABLE", "available_cores", "compile_elsewhere", "on_warm", "warm_side_kernels"]
+
+#: Set to 1 to compile everything in this process (no second process on a cold start).
+JOBS_VARIABLE = "CLOTHSIM_COMPILE_JOBS"
+_CHILD = ("import importlib, pickle, sys; module, name, argtypes = pickle.load(sys.stdin.buffer); "
+          "getattr(importlib.import_module(module), name).compile(argtypes)")
+
+_WARMERS: dict[str, Callable[[], None]] = {}
+
+
+def available_cores() -> int:
+    """Cores this process may run on (its CPU affinity, else the machine's count)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def on_warm(name: str, warm: Callable[[], None]) -> None:
+    """Register ``warm`` (compiles or loads a small kernel with the argument types it will get)
+    under ``name``, to run in :func:`warm_side_kernels`; a module registers its own when imported."""
+    _WARMERS[name] = warm
+
+
+def warm_side_kernels() -> None:
+    """Compile (or load) the small kernels registered with :func:`on_warm`, in name order: the
+    blow-up guard, the rest detector and (once the renderer is imported) its mesh kernel."""
+    for name in sorted(_WARMERS):
+        _WARMERS[name]()
+
+
+def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], None]) -> None:
+    """Compile ``dispatcher`` for ``argtypes`` into the on-disk cache in a second process while
+    ``meanwhile()`` compiles the rest here; the caller then loads it from the cache.
+
+    Numba compiles one function at a time per process (a global lock), so a cold start on two
+    cores otherwise leaves one idle. (A fork of this process, which skips the 0.7 s import, was
+    slower: 19.7-20.8 s against 16.2-18.0 s for a cold ``simulate``, alternated; copy-on-write
+    faults of two processes both busy in Python, presumably.) The wait shows as the kernel's own
+    compile (the notice and ``clothsim bench compile`` see it so). With one core, with ``CLOTHSIM_COMPILE_JOBS=1``, when
+    the kernel is cached already, or when the second process fails, nothing is done here and the
+    caller's compile happens in this process as usual.
+    """
+    from numba.core import event
+
+    if os.environ.get(JOBS_VARIABLE) == "1" or available_cores() < 2 or is_cached(dispatcher, argtypes):
+        meanwhile()
+        return
+    func = dispatcher.py_func
+    try:
+        child = subprocess.Popen([sys.executable, "-c", _CHILD], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
+                                 stderr=subprocess.DEVNULL)
+        child.stdin.write(pickle.dumps((func.__module__, func.__name__, argtypes)))
+        child.stdin.close()
+    except OSError:
+        meanwhile()
+        return
+    try:
+        meanwhile()
+        with event.trigger_event("numba:compile", data={"dispatcher": dispatcher, "args": argtypes,
+                                                        "return_type": None}):
+            child.wait()
+    finally:
+        if child.poll() is None:  # interrupted: the second process goes too
+            child.kill()
+            child.wait()

@@ -1,0 +1,52 @@
+"""The position corrections every integrator shares, run after its update in the spec's order:
+self-collision -> colliders -> Provot.
+
+``post`` is the :class:`~clothsim.sim.state.Corrections` group packed by
+:func:`clothsim.sim.solvers.post_args`, so the integrators' substep takes one argument for all of them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from ...jit import EXACT
+
+from .provot import provot
+from .colliders import collide_reachable
+from .colliders.mesh import mesh_corrections
+from .selfcollide import self_collide
+from ..state import Corrections
+
+
+@njit(**EXACT)
+def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.ndarray, rest: np.ndarray,
+                nw: int, post: tuple, substep: int) -> int:
+    """Apply self-collision, colliders and Provot in place at substep ``substep`` of the call;
+    returns the colliders skipped.
+
+    ``post`` is the :class:`~clothsim.sim.state.Corrections` group.
+    """
+    skipped = 0
+    if post.self_mode != 0:
+        h = post.hash
+        self_collide(pos, free, h.thickness, h.sim_steps, post.self_mode, h.cell[0], h.cell[1], h.cell[2], h.keys,
+                     h.slots, h.start, h.order)
+    skipped += collide_group(pos, last, post.col, post.mov, substep)
+    skipped += mesh_corrections(pos, last, free, post.mesh)
+    if post.stretch_limit > 0.0:
+        provot(pos, post.pinned, blocks, rest, nw, post.stretch_limit)
+    return skipped
+
+
+@njit(**EXACT)
+def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, mov: tuple | None, substep: int) -> int:
+    """The collider pass when the scene has colliders (``col`` is not None); returns those skipped."""
+    if col is None:
+        return 0
+    return collide_reachable(pos, last, col, mov, col.capsules, col.cuboids, substep)
+
+
+def has_corrections(post: Corrections) -> bool:
+    """True when any correction pass is on (then velocities must be re-derived from positions)."""
+    return bool(post.self_mode != 0 or post.col is not None or post.stretch_limit > 0.0 or post.mesh is not None)

@@ -1,0 +1,111 @@
+"""The substep of every integrator but the spec's fast path, as one ordered list of passes:
+
+    forces (springs + gravity) -> wind -> the integrator's advance -> moving pins
+    -> (XPBD: its constraint solve) -> corrections (self-collision, colliders, Provot)
+    -> velocities re-derived from the corrected positions
+
+An integrator is only its advance rule, a group of its own (:class:`~.verlet.VerletRate`,
+:class:`~.symplectic.Symplectic`, :class:`~.implicit.Implicit`, :class:`~.xpbd.Xpbd`): exactly one
+is given, the others are ``None``, and Numba prunes the branches of the absent ones before typing,
+so each integrator compiles only its own code, as each optional pass (wind, pins, colliders) does.
+The spec's fast path runs the same passes' work items in the thread team (:mod:`.frame`).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ...jit import EXACT, KERNEL
+from ..passes.wind import add_wind
+from ..passes.springs import accumulate_forces
+from ..passes.corrections import corrections
+from ..passes.pins import move_pins, pin_velocities, substep_time
+from .implicit import Implicit, implicit_update
+from .symplectic import Symplectic, symplectic_step
+from .verlet import VerletRate, verlet_rate_step
+from .xpbd import Xpbd, kick, predict, solve_constraints
+
+__all__ = ["Step", "integrate_substeps", "velocities_from_positions"]
+
+
+class Step(NamedTuple):
+    """What every integrator's substep reads: the (3, N) state and its velocity, the force buffer,
+    the free points, Provot's spring blocks and rest lengths, the grid width, the point mass,
+    gravity, dt, the damping factors (velocity factor ``f``, force-term scale ``phi``) and whether
+    velocities are re-derived from the corrected positions."""
+
+    pos: np.ndarray
+    last: np.ndarray
+    vel: np.ndarray
+    forces: np.ndarray
+    free: np.ndarray
+    blocks: np.ndarray
+    rest: np.ndarray
+    nw: int
+    mass: float
+    gravity: np.ndarray
+    dt: float
+    f: float
+    phi: float
+    fix_velocity: bool
+
+
+@njit(**KERNEL)
+def velocities_from_positions(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, free: np.ndarray,
+                              dt: float) -> None:
+    """v = (x - x_last)/dt, so that collision and Provot corrections also change the velocity."""
+    inv = 1.0 / dt
+    for ax in range(3):
+        for k in range(free.shape[0]):
+            p = free[k]
+            vel[ax, p] = (pos[ax, p] - last[ax, p]) * inv
+
+
+@njit(**EXACT)
+def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, wind: tuple | None, pins: tuple | None,
+                       verlet: VerletRate | None, symplectic: Symplectic | None, implicit: Implicit | None,
+                       xpbd: Xpbd | None) -> tuple[int, int]:
+    """``steps`` substeps with the one integrator whose group is given; returns (colliders
+    skipped, CG iterations). ``post`` is the :class:`~clothsim.sim.state.Corrections` group,
+    ``wind`` and ``pins`` the :mod:`clothsim.sim.state` groups, None when the scene has none."""
+    pos = s.pos
+    last = s.last
+    skipped = 0
+    iterations = 0
+    offset = np.empty(3)
+    for substep in range(steps):
+        # forces: XPBD takes the springs as constraints, and only the wind as a force
+        if xpbd is None:
+            accumulate_forces(pos, s.forces, stream, s.mass, s.gravity)
+        if wind is not None:
+            if xpbd is not None:
+                s.forces[:, :] = 0.0
+            add_wind(pos, last, s.forces, wind, substep_time(wind.clock, substep, wind.dt))
+        # the integrator's advance
+        if verlet is not None:
+            verlet_rate_step(pos, last, s.forces, s.free, 1.0 / s.mass, s.dt, s.f, s.phi)
+        if symplectic is not None:
+            symplectic_step(pos, last, s.vel, s.forces, s.free, 1.0 / s.mass, s.dt, s.f, s.phi)
+        if implicit is not None:
+            iterations += implicit_update(pos, last, s.vel, s.forces, s.free, implicit.mask, implicit.si,
+                                          implicit.sj, s.rest, implicit.kspr, implicit.jac, implicit.scratch, s.mass,
+                                          s.dt, implicit.c, implicit.keep_after, implicit.tol, implicit.max_iter)
+        if xpbd is not None:
+            if wind is not None:
+                kick(s.vel, s.forces, s.free, xpbd.w, s.dt * s.phi)
+            predict(pos, last, s.vel, s.free, s.gravity, s.dt, s.f, s.phi)
+        # moving pins
+        if pins is not None:
+            move_pins(pos, last, pins, substep_time(pins.clock, substep + 1, pins.dt), offset)
+            if implicit is not None:
+                pin_velocities(pos, last, s.vel, pins, s.dt)
+        if xpbd is not None:
+            solve_constraints(pos, xpbd.w, xpbd.si, xpbd.sj, s.rest, xpbd.kspr, xpbd.lam, s.dt, xpbd.iterations)
+        # constraints and contacts
+        skipped += corrections(pos, last, s.free, s.blocks, s.rest, s.nw, post, substep)
+        if s.fix_velocity:
+            velocities_from_positions(pos, last, s.vel, s.free, s.dt)
+    return skipped, iterations
