@@ -401,6 +401,14 @@ def test_the_cli_stops_within_two_seconds_with_a_page_watching(how):
     assert took < 2.0, took
 
 
+def test_the_served_scene_itself_is_bounded(tmp_path):
+    path = tmp_path / "heavy.json"
+    path.write_text(json.dumps({"cloth": PINNED2["cloth"], "simulation": {"simulation_steps": 100000}}))
+    line = error_line(run_cli("serve", str(path), "--port", "0"))
+    assert line.startswith(f"clothsim: error: heavy.json: simulation.simulation_steps: 100000 substeps a frame "
+                           "would take about 37.5 s a frame"), line
+
+
 def test_bad_allow_origin_is_one_line():
     assert error_line(run_cli("serve", "--allow-origin", "evil.example/path")) == (
         'clothsim: error: --allow-origin: expected scheme://host[:port] such as https://example.org, got '

@@ -91,6 +91,7 @@ class Engine:
         self.samples = samples
         self.clip_folder = clip_folder
         self.scenes: tuple[str, ...] = tuple(bundled_scene_names())
+        limits.check_scene(scene, name)
         self.simulation = Simulation(scene)
         self.settings = settings or RenderSettings.from_scene(scene)
         self.orbit = self._initial_orbit()
