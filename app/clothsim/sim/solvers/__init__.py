@@ -153,7 +153,6 @@ def _advance(sim: Any, steps: int) -> None:
             verlet_start(sim._pos, sim._last, st.vel, sim._forces, sim.free, 1.0 / sim.mass, dt, c)
             st.started = True
         verlet = VerletRate(1.0 / sim.mass)
-        fix = False  # Verlet keeps no velocity: (x - x_last) / dt is its velocity
     elif name == "symplectic_euler":
         symplectic = Symplectic(1.0 / sim.mass)
     elif name == "implicit_euler":
@@ -163,7 +162,6 @@ def _advance(sim: Any, steps: int) -> None:
                             CG_MAX_ITERATIONS)
     elif name == "xpbd":
         xpbd = Xpbd(st.inv_mass, st.si, st.sj, st.kspr, st.lam, st.iterations)
-        fix = True  # its positions are the solution: velocities always follow them
     else:  # the scene validator only admits the four names above
         raise ValueError(f"unknown integrator {name!r}")
     step = Step(sim._pos, sim._last, st.vel, sim._forces, sim.free, sim._blocks, sim._rest, sim.nw, sim.mass,

@@ -35,7 +35,8 @@ class Step(NamedTuple):
     """What every integrator's substep reads: the (3, N) state and its velocity, the force buffer,
     the free points, Provot's spring blocks and rest lengths, the grid width, the point mass,
     gravity, dt, the damping factors (velocity factor ``f``, force-term scale ``phi``) and whether
-    velocities are re-derived from the corrected positions."""
+    symplectic and implicit Euler re-derive velocities from the corrected positions (XPBD always
+    does, Verlet keeps none)."""
 
     pos: np.ndarray
     last: np.ndarray
@@ -77,8 +78,14 @@ def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, wind: tu
     iterations = 0
     offset = np.empty(3)
     for substep in range(steps):
-        # forces: XPBD takes the springs as constraints, and only the wind as a force
-        if xpbd is None:
+        # forces: XPBD takes the springs as constraints, and only the wind as a force. (Each test
+        # names a group that is None for XPBD: Numba prunes a branch on an argument that is None,
+        # not one on an argument that is not, so XPBD then compiles no spring-force code.)
+        if verlet is not None:
+            accumulate_forces(pos, s.forces, stream, s.mass, s.gravity)
+        if symplectic is not None:
+            accumulate_forces(pos, s.forces, stream, s.mass, s.gravity)
+        if implicit is not None:
             accumulate_forces(pos, s.forces, stream, s.mass, s.gravity)
         if wind is not None:
             if xpbd is not None:
@@ -106,6 +113,13 @@ def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, wind: tu
             solve_constraints(pos, xpbd.w, xpbd.si, xpbd.sj, s.rest, xpbd.kspr, xpbd.lam, s.dt, xpbd.iterations)
         # constraints and contacts
         skipped += corrections(pos, last, s.free, s.blocks, s.rest, s.nw, post, substep)
-        if s.fix_velocity:
+        # velocities follow the corrected positions (Verlet's velocity is its positions already)
+        if symplectic is not None:
+            if s.fix_velocity:
+                velocities_from_positions(pos, last, s.vel, s.free, s.dt)
+        if implicit is not None:
+            if s.fix_velocity:
+                velocities_from_positions(pos, last, s.vel, s.free, s.dt)
+        if xpbd is not None:
             velocities_from_positions(pos, last, s.vel, s.free, s.dt)
     return skipped, iterations
