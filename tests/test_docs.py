@@ -21,7 +21,6 @@ README_MAX_LINES = 200
 
 # Pages the README links to that are written on another line of work; once a page exists it is
 # checked like every other (its anchors included). Remove a name once its page has landed.
-PENDING = {DOCS / "architecture.md"}
 
 FENCE = re.compile(r"^(```|~~~)")
 LINK = re.compile(r"!?\[(?:[^\]\\]|\\.)*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)")
@@ -101,8 +100,6 @@ def test_relative_links_resolve(page: Path) -> None:
             problems.append(f"{target}: absolute path (links must be relative)")
             continue
         dest = (page.parent / path_part).resolve() if path_part else page
-        if dest in PENDING and not dest.exists():
-            continue
         if not dest.exists():
             problems.append(f"{target}: no such file")
             continue
@@ -116,8 +113,6 @@ def test_relative_links_resolve(page: Path) -> None:
 
 def test_every_docs_page_has_a_contents_list() -> None:
     for page in sorted(DOCS.glob("*.md")):
-        if page in PENDING:
-            continue
         own = [t for t in links(page) if t.startswith("#")]
         assert len(own) >= 2, f"{page.name}: no contents list (links to its own sections) at the top"
 
