@@ -28,6 +28,17 @@ def run_cli(*args: str, cwd: Path | None = None, timeout: float = 300) -> subpro
                           timeout=timeout, env=env)
 
 
+def child_pids(pid: int) -> list[int]:
+    """The process ids of ``pid``'s children (Linux's /proc)."""
+    kids: list[int] = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            kids += [int(x) for x in (task / "children").read_text().split()]
+        except OSError:
+            pass
+    return kids
+
+
 def error_line(r: subprocess.CompletedProcess) -> str:
     """The single stderr line of a failed command, checked for shape: exit 2, no traceback."""
     assert r.returncode == 2, (r.returncode, r.stderr)

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from conftest import error_line, run_cli
+from conftest import child_pids, error_line, run_cli
 
 import clothsim
 from clothsim.errors import ClothsimError
@@ -277,16 +277,6 @@ def test_same_folder_other_sweep_or_foreign_files_refused(tmp_path: Path, scene_
     assert os.listdir(mine) == ["notes.txt"] and (mine / "notes.txt").read_text() == "keep me"
 
 
-def _children(pid: int) -> list[int]:
-    kids: list[int] = []
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        try:
-            kids += [int(x) for x in (task / "children").read_text().split()]
-        except OSError:
-            pass
-    return kids
-
-
 def test_killed_worker_then_resume_completes(tmp_path: Path, scene_file: Path) -> None:
     if not Path(f"/proc/{os.getpid()}/task").exists():
         pytest.skip("needs /proc")
@@ -304,7 +294,7 @@ def test_killed_worker_then_resume_completes(tmp_path: Path, scene_file: Path) -
         while time.monotonic() < deadline and not (manifest.exists() and manifest.read_text().count("\n") >= 1):
             time.sleep(0.05)
         assert manifest.exists(), "no run finished in time"
-        workers = [k for k in _children(proc.pid)
+        workers = [k for k in child_pids(proc.pid)
                    if b"spawn_main" in Path(f"/proc/{k}/cmdline").read_bytes()]
         assert workers, "no worker process found"
         os.kill(workers[0], signal.SIGKILL)

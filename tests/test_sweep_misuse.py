@@ -20,20 +20,10 @@ from pathlib import Path
 
 import pytest
 
-from conftest import error_line
+from conftest import child_pids, error_line
 from test_locks import clothsim, kill9, manifest_ids, start, wait_for_holder
 
 LONG = ("--set", "cloth.ks=3000,4000,5000,6000", "--frames", "100000")
-
-
-def children(pid: int) -> list[int]:
-    kids: list[int] = []
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        try:
-            kids += [int(x) for x in (task / "children").read_text().split()]
-        except OSError:
-            pass
-    return kids
 
 
 def alive(pid: int) -> bool:
@@ -62,7 +52,7 @@ def workers_of(proc: subprocess.Popen, count: int, timeout: float = 60) -> tuple
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         assert proc.poll() is None, proc.communicate()
-        kids = children(proc.pid)
+        kids = child_pids(proc.pid)
         workers = [k for k in kids if b"spawn_main" in cmdline(k)]
         tracker = [k for k in kids if b"resource_tracker" in cmdline(k)]
         if len(workers) == count and tracker:
