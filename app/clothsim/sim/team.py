@@ -26,18 +26,13 @@ Results never depend on the team size: every pass is cut into the same work item
 
 from __future__ import annotations
 
-import platform
-import time
-
 import numba
 import numpy as np
-from llvmlite import ir
-from numba import njit, types
-from numba.core import cgutils
-from numba.extending import intrinsic
+from numba import njit
 
 from ..jit import EXACT
 from ..jit.compile import available_cores
+from ..jit.internals import atomic_add, atomic_cas, atomic_load, monotonic_ns, spin_pause, yield_core
 
 # Slots of the ``sync`` array (int64); 8 apart keeps the counters on their own cache line.
 ARRIVED = 0   # members at the current barrier
@@ -111,102 +106,6 @@ class TeamPlan:
             self.alone_for = self.backoff
         else:
             self.backoff = 0
-
-
-def _element_pointer(context, builder, arr_type, arr, idx):  # noqa: ANN001, ANN202
-    ary = context.make_array(arr_type)(context, builder, arr)
-    return cgutils.get_item_pointer(context, builder, arr_type, ary, [idx])
-
-
-@intrinsic
-def atomic_add(typingctx, arr, idx, val):  # noqa: ANN001, ANN201
-    """arr[idx] += val atomically (sequentially consistent); returns the old value."""
-    sig = types.int64(arr, idx, val)
-
-    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
-        ptr = _element_pointer(context, builder, sig.args[0], args[0], args[1])
-        return builder.atomic_rmw("add", ptr, args[2], "seq_cst")
-
-    return sig, codegen
-
-
-@intrinsic
-def atomic_load(typingctx, arr, idx):  # noqa: ANN001, ANN201
-    """arr[idx] read with acquire ordering (sees every write made before the matching release)."""
-    sig = types.int64(arr, idx)
-
-    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
-        ptr = _element_pointer(context, builder, sig.args[0], args[0], args[1])
-        return builder.load_atomic(ptr, "acquire", 8)
-
-    return sig, codegen
-
-
-@intrinsic
-def atomic_cas(typingctx, arr, idx, expected, new):  # noqa: ANN001, ANN201
-    """Set arr[idx] = new if it equals expected; returns the value found."""
-    sig = types.int64(arr, idx, expected, new)
-
-    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
-        ptr = _element_pointer(context, builder, sig.args[0], args[0], args[1])
-        pair = builder.cmpxchg(ptr, args[2], args[3], "seq_cst", "seq_cst")
-        return builder.extract_value(pair, 0)
-
-    return sig, codegen
-
-
-@intrinsic
-def yield_core(typingctx):  # noqa: ANN001, ANN201
-    """sched_yield(): let another runnable thread have this core."""
-    sig = types.int32()
-
-    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
-        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.IntType(32), []), "sched_yield")
-        return builder.call(fn, [])
-
-    return sig, codegen
-
-
-_CLOCK = getattr(time, "CLOCK_MONOTONIC", 1)
-
-
-@intrinsic
-def monotonic_ns(typingctx):  # noqa: ANN001, ANN201
-    """clock_gettime(CLOCK_MONOTONIC) in nanoseconds (a vDSO call: no system call, ~20 ns)."""
-    sig = types.int64()
-
-    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
-        i64 = ir.IntType(64)
-        timespec = ir.LiteralStructType([i64, i64])
-        fn = cgutils.get_or_insert_function(
-            builder.module, ir.FunctionType(ir.IntType(32), [ir.IntType(32), timespec.as_pointer()]),
-            "clock_gettime")
-        ts = cgutils.alloca_once(builder, timespec)
-        builder.call(fn, [ir.Constant(ir.IntType(32), _CLOCK), ts])
-        sec = builder.load(cgutils.gep_inbounds(builder, ts, 0, 0))
-        nsec = builder.load(cgutils.gep_inbounds(builder, ts, 0, 1))
-        return builder.add(builder.mul(sec, ir.Constant(i64, 1_000_000_000)), nsec)
-
-    return sig, codegen
-
-
-_X86 = platform.machine().lower() in ("x86_64", "amd64", "i686", "i386")
-
-
-@intrinsic
-def spin_pause(typingctx):  # noqa: ANN001, ANN201
-    """The CPU's spin-wait hint (x86 ``pause``): a waiting member leaves the core's execution
-    units, and a sibling hardware thread, to the members still working."""
-    sig = types.void()
-
-    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
-        if _X86:
-            fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(ir.VoidType(), []),
-                                                "llvm.x86.sse2.pause")
-            builder.call(fn, [])
-        return context.get_dummy_value()
-
-    return sig, codegen
 
 
 @njit(**EXACT)
