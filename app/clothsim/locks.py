@@ -41,6 +41,7 @@ import json
 import os
 import socket
 import threading
+import time
 import warnings
 from collections.abc import Iterator
 from pathlib import Path
@@ -53,6 +54,7 @@ __all__ = ["LOCK_NAME", "OutputLock", "covered", "is_lock_name", "lock_beside", 
 LOCK_NAME = ".clothsim.lock"
 _SUFFIX = ".clothsim.lock"
 _NAME_MAX = 255
+_NAME_TRIES, _NAME_WAIT_S = 20, 0.05
 
 _held: dict[Path, OutputLock] = {}  # this process's locks, by lock file
 _held_guard = threading.Lock()
@@ -204,12 +206,16 @@ def _write_holder(fd: int) -> None:
 
 def _in_use(label: str, fd: int) -> ClothsimError:
     who = "another clothsim process (which has only just started)"
-    try:
-        data = json.loads(os.pread(fd, 4096, 0).decode("utf-8"))
-        who = (f"clothsim (pid {int(data['pid'])} on host {' '.join(str(data['host']).split())[:64]}, "
-               f"started {' '.join(str(data['started']).split())[:32]})")
-    except (OSError, ValueError, KeyError, TypeError, UnicodeDecodeError):
-        pass  # the holder has only just taken the lock and not yet written its name
+    # A holder that has only just taken the lock writes its name a moment later (truncate, write,
+    # fsync): wait up to a second for it, so that two commands started together name each other.
+    for _ in range(_NAME_TRIES):
+        try:
+            data = json.loads(os.pread(fd, 4096, 0).decode("utf-8"))
+            who = (f"clothsim (pid {int(data['pid'])} on host {' '.join(str(data['host']).split())[:64]}, "
+                   f"started {' '.join(str(data['started']).split())[:32]})")
+            break
+        except (OSError, ValueError, KeyError, TypeError, UnicodeDecodeError):
+            time.sleep(_NAME_WAIT_S)
     return ClothsimError(f"{label}: being written by {who}; wait for it to end or choose another output")
 
 
