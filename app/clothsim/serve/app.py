@@ -95,8 +95,7 @@ def _foreign_origin(request: web.Request) -> bool:
     if origin is None:
         return False
     origin = origin.rstrip("/").lower()
-    own = {f"{request.scheme}://{request.host}".lower()}
-    return origin not in own and origin not in request.app[ORIGINS]
+    return origin != f"{request.scheme}://{request.host}".lower() and origin not in request.app[ORIGINS]
 
 
 async def _socket(request: web.Request) -> web.StreamResponse:
