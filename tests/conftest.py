@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -47,6 +48,36 @@ def error_line(r: subprocess.CompletedProcess) -> str:
     assert len(lines) == 1, r.stderr
     assert lines[0].startswith("clothsim: error: "), lines[0]
     return lines[0]
+
+
+def pytest_sessionstart(session: pytest.Session) -> None:
+    """Compile every kernel once, before the test workers start.
+
+    The suite runs on pytest-xdist's workers (``-n auto`` in pyproject.toml); without this, every
+    worker compiled the same kernels on first use, each in its own process, and the compile landed
+    inside whichever tests came first. ``clothsim compile`` fills the on-disk cache (Numba writes
+    each file under a temporary name and renames it, so workers that still compile one meanwhile
+    cannot corrupt it); with a warm cache it only loads, in a few seconds. A serial run
+    (``-n 0``) skips it: kernels then compile on first use, as for a user.
+    """
+    config = session.config
+    if hasattr(config, "workerinput") or not config.getoption("numprocesses", None):
+        return
+    started = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "clothsim", "compile"], capture_output=True, text=True,
+                          timeout=1800, cwd=REPO)
+    if done.returncode != 0:
+        raise pytest.UsageError(f"clothsim compile failed before the tests:\n{done.stderr}")
+    config.stash[_COMPILE_SECONDS] = time.perf_counter() - started
+
+
+def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter, config: pytest.Config) -> None:
+    seconds = config.stash.get(_COMPILE_SECONDS, None)
+    if seconds is not None:
+        terminalreporter.write_line(f"kernels compiled (or loaded) before the tests: {seconds:.1f} s")
+
+
+_COMPILE_SECONDS = pytest.StashKey[float]()
 
 
 @pytest.fixture

@@ -10,16 +10,17 @@ file, the field path (``cloth.num_width_points``, ``sphere[1].radius``) and what
 from __future__ import annotations
 
 import json
-import math
 import os
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from . import validate as V
 from .errors import ClothsimError, SceneError
+from .colliders import (KINDS, MAX_LENGTH, MIN_LENGTH, BoxSpec, CapsuleSpec, PlaneSpec,  # noqa: F401 - re-exported
+                        SphereSpec, collider_json)
 from .motion import MOTION, MotionSpec
-from .meshcollider import MESH, MeshSpec
+from .meshcollider import MeshSpec
 from .resources import data_dir
 from .validate import SceneWarning  # noqa: F401 - warned by the rules, imported from here by users
 from .wind import WINDS, WindSpec
@@ -71,79 +72,6 @@ class ClothSpec:
 
 
 @dataclass(frozen=True)
-class SphereSpec:
-    """A sphere collider; ``motion`` (optional) moves its origin."""
-
-    origin: tuple[float, float, float]
-    radius: float
-    friction: float
-    motion: MotionSpec | None = None
-
-    @property
-    def anchor(self) -> tuple[float, float, float]:
-        """The position a ``motion`` keyframe gives: the origin."""
-        return self.origin
-
-
-@dataclass(frozen=True)
-class PlaneSpec:
-    """A plane collider; ``normal`` is stored normalised; ``motion`` (optional) moves its point."""
-
-    point: tuple[float, float, float]
-    normal: tuple[float, float, float]
-    friction: float
-    motion: MotionSpec | None = None
-
-    @property
-    def anchor(self) -> tuple[float, float, float]:
-        """The position a ``motion`` keyframe gives: the plane's point."""
-        return self.point
-
-
-@dataclass(frozen=True)
-class CapsuleSpec:
-    """A capsule collider: the points within ``radius`` of the segment a-b. ``motion`` (optional)
-    moves the segment rigidly: a keyframe gives the position of its midpoint."""
-
-    a: tuple[float, float, float]
-    b: tuple[float, float, float]
-    radius: float
-    friction: float
-    motion: MotionSpec | None = None
-
-    @property
-    def anchor(self) -> tuple[float, float, float]:
-        """The segment's midpoint (what a ``motion`` keyframe places)."""
-        return tuple(0.5 * (p + q) for p, q in zip(self.a, self.b))  # type: ignore[return-value]
-
-
-@dataclass(frozen=True)
-class BoxSpec:
-    """An oriented box collider: ``center``, ``half_extents`` along its own axes and ``rotation``
-    in degrees about x, y, z, applied as R = Rz . Ry . Rx (x first, right-handed). ``motion``
-    (optional) moves its center; the box does not turn."""
-
-    center: tuple[float, float, float]
-    half_extents: tuple[float, float, float]
-    rotation: tuple[float, float, float]
-    friction: float
-    motion: MotionSpec | None = None
-
-    @property
-    def anchor(self) -> tuple[float, float, float]:
-        """The position a ``motion`` keyframe gives: the center."""
-        return self.center
-
-    def matrix(self) -> tuple[tuple[float, float, float], ...]:
-        """R = Rz . Ry . Rx as three rows: box axes to world (column k is the box's k-th axis)."""
-        rx, ry, rz = (math.radians(a) for a in self.rotation)
-        cx, sx, cy, sy, cz, sz = math.cos(rx), math.sin(rx), math.cos(ry), math.sin(ry), math.cos(rz), math.sin(rz)
-        return ((cz * cy, cz * sy * sx - sz * cx, cz * sy * cx + sz * sx),
-                (sz * cy, sz * sy * sx + cz * cx, sz * sy * cx - cz * sx),
-                (-sy, cy * sx, cy * cx))
-
-
-@dataclass(frozen=True)
 class SimulationSpec:
     """The optional ``simulation`` object (spec defaults)."""
 
@@ -175,14 +103,14 @@ class Scene:
     meshes: tuple[MeshSpec, ...] = ()
 
     @property
-    def colliders(self) -> tuple[SphereSpec | PlaneSpec | CapsuleSpec | BoxSpec, ...]:
-        """Every collider, kind by kind (spheres, planes, capsules, boxes)."""
-        return (*self.spheres, *self.planes, *self.capsules, *self.boxes)
+    def colliders(self) -> tuple[SphereSpec | PlaneSpec | CapsuleSpec | BoxSpec | MeshSpec, ...]:
+        """Every collider, kind by kind in the order of :data:`clothsim.colliders.KINDS`."""
+        return tuple(spec for kind in KINDS for spec in getattr(self, kind.attr))
 
     @property
     def moving(self) -> bool:
-        """True when any collider (triangle meshes included) carries a ``motion``."""
-        return any(c.motion is not None for c in (*self.colliders, *self.meshes))
+        """True when any collider carries a ``motion``."""
+        return any(c.motion is not None for c in self.colliders)
 
     def with_cloth(self, **changes: Any) -> "Scene":
         """A copy with some cloth fields replaced (no re-validation)."""
@@ -274,20 +202,8 @@ def scene_from_dict(data: Any, path: str = "<scene>", files: Any = None) -> Scen
     values = SCENE(data, V.At(path, files=files))
     cloth = ClothSpec(**values["cloth"])
     _check_memory(cloth, values["simulation"], path, values["winds"])
-    return Scene(cloth=cloth, spheres=values["spheres"], planes=values["planes"], capsules=values["capsules"],
-                 boxes=values["boxes"], winds=values["winds"], simulation=values["simulation"],
-                 render=values["render"], path=path, meshes=values["meshes"])
-
-
-def collider_json(spec: SphereSpec | PlaneSpec | CapsuleSpec | BoxSpec) -> dict[str, Any]:
-    """A collider as scene-file JSON (what loads back to the same spec)."""
-    out: dict[str, Any] = {k: list(v) if isinstance(v, tuple) else v
-                           for k, v in ((f.name, getattr(spec, f.name)) for f in fields(spec)) if k != "motion"}
-    motion = spec.motion
-    if motion is not None:
-        out["motion"] = ({"velocity": list(motion.velocity)} if motion.velocity is not None
-                         else {"keyframes": [[t, list(p)] for t, p in motion.keyframes]})
-    return out
+    return Scene(cloth=cloth, winds=values["winds"], simulation=values["simulation"], render=values["render"],
+                 path=path, **{kind.attr: values[kind.attr] for kind in KINDS})
 
 
 def check_field(section: str, name: str, value: Any) -> Any:
@@ -312,7 +228,6 @@ MAX_SIDE = 2**31 - 1
 # combination: the mass per point (1e-28 kg at least), the substep (1e-12 s at least, and its
 # square) and the stable-step estimate (ks / mass). Without the bounds, e.g. ks = 1e308 or
 # frames_per_sec = 1e200 ended the stability check in a ZeroDivisionError.
-MIN_LENGTH, MAX_LENGTH = 1e-6, 1e6
 MIN_DENSITY, MAX_DENSITY = 1e-6, 1e6
 MAX_KS = 1e12
 MIN_FPS, MAX_FPS = 1e-3, 1e6
@@ -346,12 +261,6 @@ def _pin_motion(done: dict[str, Any]) -> V.Rule:
     return check
 
 
-def _unit(v: tuple[float, float, float], at: V.At) -> tuple[float, float, float]:
-    length = math.hypot(*v)
-    return (v[0] / length, v[1] / length, v[2] / length)
-
-
-_FRICTION = V.number(ge=0.0, le=1.0)
 _ORIENTATION = V.choice((), aliases={0: HORIZONTAL, 1: VERTICAL, "horizontal": HORIZONTAL, "vertical": VERTICAL},
                         expected='0/"horizontal" or 1/"vertical"', fold_case=True)
 
@@ -370,41 +279,6 @@ CLOTH = V.record({
     "enable_shearing": V.default(V.boolean, True),
     "enable_bending": V.default(V.boolean, True),
     "pin_motion": V.Field(depends=_pin_motion, default=None),
-})
-
-# Collider sizes: positive and bounded like the cloth's lengths, so that a collider's bounding box
-# and the sub-sampling step derived from its smallest size stay finite and non-zero.
-_SIZE = V.number(ge=MIN_LENGTH, le=MAX_LENGTH)
-_ANGLE = V.number(ge=-36000.0, le=36000.0)
-
-SPHERE = V.record({
-    "origin": V.required(V.vec3()),
-    "radius": V.required(V.number(gt=0.0)),
-    "friction": V.required(_FRICTION),
-    "motion": V.optional(MOTION),
-})
-
-PLANE = V.record({
-    "point": V.required(V.vec3()),
-    "normal": V.required(V.then(V.vec3(nonzero=True), _unit)),
-    "friction": V.required(_FRICTION),
-    "motion": V.optional(MOTION),
-})
-
-CAPSULE = V.record({
-    "a": V.required(V.vec3()),
-    "b": V.required(V.vec3()),
-    "radius": V.required(_SIZE),
-    "friction": V.required(_FRICTION),
-    "motion": V.optional(MOTION),
-})
-
-BOX = V.record({
-    "center": V.required(V.vec3()),
-    "half_extents": V.required(V.vec3(_SIZE)),
-    "rotation": V.default(V.vec3(_ANGLE), (0.0, 0.0, 0.0)),
-    "friction": V.required(_FRICTION),
-    "motion": V.optional(MOTION),
 })
 
 _SIM_DEFAULTS = SimulationSpec()
@@ -438,15 +312,12 @@ def _render(value: Any, at: V.At) -> dict[str, Any]:
 
 SCENE = V.record({
     "cloth": V.required(CLOTH),
-    "sphere": V.default(V.one_or_many(V.then(SPHERE, lambda v, at: SphereSpec(**v))), (), dest="spheres"),
-    "plane": V.default(V.one_or_many(V.then(PLANE, lambda v, at: PlaneSpec(**v))), (), dest="planes"),
-    "capsule": V.default(V.one_or_many(V.then(CAPSULE, lambda v, at: CapsuleSpec(**v))), (), dest="capsules"),
-    "box": V.default(V.one_or_many(V.then(BOX, lambda v, at: BoxSpec(**v))), (), dest="boxes"),
-    "mesh": V.default(V.one_or_many(MESH), (), dest="meshes"),
+    **{kind.key: V.default(V.one_or_many(kind.rule), (), dest=kind.attr) for kind in KINDS},
     "wind": V.default(WINDS, (), dest="winds"),
     "simulation": V.default(_simulation, _SIM_DEFAULTS, dest="simulation"),
     "render": V.default(_render, None),
-}, unknown="unknown top-level object (expected one of: cloth, sphere, plane, capsule, box, mesh, wind, simulation, render)")
+}, unknown=("unknown top-level object (expected one of: cloth, " + ", ".join(k.key for k in KINDS)
+            + ", wind, simulation, render)"))
 
 
 # ----------------------------------------------------------------------------------------------

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from ..render import mesh as render_mesh
+from ..colliders import KINDS
 from ..scene import Scene
 from ..sim.passes.colliders.moving import shift
 
@@ -136,10 +137,11 @@ def _meshes(scene: Scene) -> Iterator[Collider]:
         yield Collider(f"mesh_{k}", mesh, moving=spec if spec.motion is not None else None)
 
 
-#: One function per kind of collider, in the order they are written.
-COLLIDER_KINDS: tuple[Callable[[Scene], Iterator[Collider]], ...] = (_spheres, _planes, _capsules, _boxes, _meshes)
+#: The exported geometry of each kind of collider (:data:`clothsim.colliders.KINDS`), by its key.
+COLLIDER_KINDS: dict[str, Callable[[Scene], Iterator[Collider]]] = {
+    "sphere": _spheres, "plane": _planes, "capsule": _capsules, "box": _boxes, "mesh": _meshes}
 
 
 def colliders(scene: Scene) -> list[Collider]:
-    """Every collider of ``scene``, kind by kind."""
-    return [c for kind in COLLIDER_KINDS for c in kind(scene)]
+    """Every collider of ``scene``, kind by kind in the registry's order."""
+    return [c for kind in KINDS for c in COLLIDER_KINDS[kind.key](scene)]

@@ -71,8 +71,8 @@ class CompileNotice(event.Listener):
     """Says on ``stream`` that kernels are being compiled, once, when the first compile starts;
     on a terminal it also shows which kernel and the seconds so far while a compile runs."""
 
-    def __init__(self, stream: TextIO = sys.stderr, estimate: float = FIRST_RUN_SECONDS) -> None:
-        self.stream = stream
+    def __init__(self, stream: TextIO | None = None, estimate: float = FIRST_RUN_SECONDS) -> None:
+        self._stream = stream
         self.estimate = estimate
         self.announced = False
         self.depth = 0
@@ -80,6 +80,12 @@ class CompileNotice(event.Listener):
         self._bar: Any = None
         self._began = 0.0
         self._lock = threading.Lock()
+
+    @property
+    def stream(self) -> TextIO:
+        """The stream given, or the process's stderr as it is now (not as it was at install: a
+        caller may have replaced it since, and closed the one it replaced)."""
+        return self._stream if self._stream is not None else sys.stderr
 
     def on_start(self, ev: event.Event) -> None:
         with self._lock:
@@ -90,8 +96,11 @@ class CompileNotice(event.Listener):
             if not self.announced:
                 self.announced = True
                 self._began = time.perf_counter()
-                print(f"clothsim: compiling kernels for this CPU (first run only, about {self.estimate:.0f} s)...",
-                      file=self.stream, flush=True)
+                try:
+                    print(f"clothsim: compiling kernels for this CPU (first run only, about {self.estimate:.0f} s)...",
+                          file=self.stream, flush=True)
+                except (OSError, ValueError):  # a closed or broken stream: the compile goes on unannounced
+                    return
                 if self.stream.isatty():
                     threading.Thread(target=self._tick, name="clothsim-compile-progress", daemon=True).start()
             if self.stream.isatty() and self._bar is None:
@@ -120,8 +129,14 @@ class CompileNotice(event.Listener):
                     self._bar.refresh()
 
 
-def install_notice(stream: TextIO = sys.stderr) -> CompileNotice:
-    """Register a :class:`CompileNotice` for the rest of this process."""
-    notice = CompileNotice(stream)
-    event.register("numba:compile", notice)
-    return notice
+_installed: CompileNotice | None = None
+
+
+def install_notice() -> CompileNotice:
+    """Register the process's one :class:`CompileNotice` (on stderr) for the rest of this process;
+    calling it again (``main()`` run twice in one process) returns the same notice."""
+    global _installed
+    if _installed is None:
+        _installed = CompileNotice()
+        event.register("numba:compile", _installed)
+    return _installed

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..cloth import Springs
 from ..errors import ClothsimError
+from ..colliders import KINDS
 from ..scene import Scene, available_memory
 from ..sim.passes.colliders.moving import posed, shift
 from . import mesh, textures
@@ -405,48 +406,16 @@ class Renderer:
             ctx.wireframe = True
             dim = tuple(0.45 * c for c in srgb_to_linear(settings.color))
             set_uniform(prog, "u_color", (*dim, 1.0))
-        if look != "wireframe":
-            # A sphere's far side is hidden by its near side (seen from outside): culling it
-            # halves the triangles rasterised, and small triangles dominate llvmpipe's MSAA cost.
-            ctx.enable(moderngl.CULL_FACE)
         # Moving colliders are drawn where they are at the simulation's time: the shape built at
-        # its scene pose, moved by the model matrix.
+        # its scene pose, moved by the model matrix. Kind by kind, in the registry's order.
         now = float(getattr(sim, "time", 0.0))
-        for sphere in scene.spheres:
-            vbo, ibo, _ = self._sphere(settings.sphere_resolution)
-            vao = self._vao(look, "sphere", settings.sphere_resolution, lambda p: ctx.vertex_array(
-                p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
-                ibo, index_element_size=4, skip_errors=True))
-            model = np.diag([*(3 * [sphere.radius * SPHERE_DRAW_SCALE]), 1.0])
-            model[:3, 3] = posed(sphere, now).origin
-            _set_matrix(prog, "u_model", model)
-            vao.render(moderngl.TRIANGLES)
-        for capsule in scene.capsules:
-            # drawn thinner for the reason spheres are (see SPHERE_DRAW_SCALE)
-            key = ("capsule", capsule.a, capsule.b, capsule.radius, settings.sphere_resolution)
-            self._draw_shape(prog, look, key, lambda c=capsule: mesh.capsule_mesh(
-                c.a, c.b, c.radius * SPHERE_DRAW_SCALE, *settings.sphere_resolution), shift(capsule, now))
+        draw = {"sphere": self._draw_sphere, "plane": self._draw_plane, "capsule": self._draw_capsule,
+                "box": self._draw_box, "mesh": self._draw_mesh}
+        for kind in KINDS:
+            for spec in getattr(scene, kind.attr):
+                draw[kind.key](prog, look, settings, spec, now)
         ctx.disable(moderngl.CULL_FACE)
-        self._draw_meshes(prog, look, sim)
-        if scene.planes or scene.boxes:
-            # Cloth resting on a plane or a box face sits 0.0001 above it; push them back in
-            # depth so the two never fight for the same pixels.
-            ctx.polygon_offset = (1.0, 4.0)
-            for plane in scene.planes:
-                vbo, ibo, _ = self._plane(plane.point, plane.normal)
-                vao = self._vao(look, "plane", (plane.point, plane.normal), lambda p: ctx.vertex_array(
-                    p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
-                    ibo, index_element_size=4, skip_errors=True))
-                _set_matrix(prog, "u_model", _translation(shift(plane, now)))
-                vao.render(moderngl.TRIANGLES)
-            if look != "wireframe":
-                ctx.enable(moderngl.CULL_FACE)
-            for box in scene.boxes:
-                key = ("box", box.center, box.half_extents, box.rotation)
-                self._draw_shape(prog, look, key, lambda b=box: mesh.box_mesh(b.center, b.half_extents, b.matrix()),
-                                 shift(box, now))
-            ctx.disable(moderngl.CULL_FACE)
-            ctx.polygon_offset = (0.0, 0.0)
+        ctx.polygon_offset = (0.0, 0.0)
         ctx.wireframe = False
         ctx.copy_framebuffer(self._fbo, self._ms_fbo)  # resolves the multisampled image
 
@@ -466,23 +435,72 @@ class Renderer:
             self._meshes[id(spec)] = entry
         return entry[1], entry[2]
 
-    def _draw_meshes(self, prog: Any, look: str, sim: ClothState) -> None:
-        """Triangle-mesh colliders at their place at the simulation's time (culled from behind
-        when closed, both sides when open)."""
+    # -- colliders, one method per kind (see clothsim.colliders.KINDS) --------------------------
+    def _solid(self, look: str, culled: bool, offset: bool) -> None:
+        """Draw state of a collider: back faces culled (a closed shape seen from outside: its far
+        side is hidden by its near side, and culling halves the triangles rasterised, small
+        triangles dominating llvmpipe's MSAA cost), and pushed back in depth (a cloth resting on
+        a plane or a box face sits 0.0001 above it; the two must never fight for the same
+        pixels)."""
         import moderngl
 
-        for spec in sim.scene.meshes:
-            vbo, ibo = self._mesh_collider(spec)
-            vao = self._vao(look, "mesh", id(spec), lambda p: self.ctx.vertex_array(
-                p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
-                ibo, index_element_size=4, skip_errors=True))
-            model = np.eye(4)
-            model[:3, 3] = spec.track().at(getattr(sim, "time", 0.0))
-            _set_matrix(prog, "u_model", model)
-            if spec.closed and look != "wireframe":
-                self.ctx.enable(moderngl.CULL_FACE)
-            vao.render(moderngl.TRIANGLES)
+        if culled and look != "wireframe":
+            self.ctx.enable(moderngl.CULL_FACE)
+        else:
             self.ctx.disable(moderngl.CULL_FACE)
+        self.ctx.polygon_offset = (1.0, 4.0) if offset else (0.0, 0.0)
+
+    def _draw_sphere(self, prog: Any, look: str, settings: RenderSettings, sphere: Any, now: float) -> None:
+        import moderngl
+
+        self._solid(look, True, False)
+        vbo, ibo, _ = self._sphere(settings.sphere_resolution)
+        vao = self._vao(look, "sphere", settings.sphere_resolution, lambda p: self.ctx.vertex_array(
+            p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
+            ibo, index_element_size=4, skip_errors=True))
+        model = np.diag([*(3 * [sphere.radius * SPHERE_DRAW_SCALE]), 1.0])
+        model[:3, 3] = posed(sphere, now).origin
+        _set_matrix(prog, "u_model", model)
+        vao.render(moderngl.TRIANGLES)
+
+    def _draw_capsule(self, prog: Any, look: str, settings: RenderSettings, capsule: Any, now: float) -> None:
+        self._solid(look, True, False)
+        # drawn thinner for the reason spheres are (see SPHERE_DRAW_SCALE)
+        key = ("capsule", capsule.a, capsule.b, capsule.radius, settings.sphere_resolution)
+        self._draw_shape(prog, look, key, lambda c=capsule: mesh.capsule_mesh(
+            c.a, c.b, c.radius * SPHERE_DRAW_SCALE, *settings.sphere_resolution), shift(capsule, now))
+
+    def _draw_plane(self, prog: Any, look: str, settings: RenderSettings, plane: Any, now: float) -> None:
+        import moderngl
+
+        self._solid(look, False, True)
+        vbo, ibo, _ = self._plane(plane.point, plane.normal)
+        vao = self._vao(look, "plane", (plane.point, plane.normal), lambda p: self.ctx.vertex_array(
+            p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
+            ibo, index_element_size=4, skip_errors=True))
+        _set_matrix(prog, "u_model", _translation(shift(plane, now)))
+        vao.render(moderngl.TRIANGLES)
+
+    def _draw_box(self, prog: Any, look: str, settings: RenderSettings, box: Any, now: float) -> None:
+        self._solid(look, True, True)
+        key = ("box", box.center, box.half_extents, box.rotation)
+        self._draw_shape(prog, look, key, lambda b=box: mesh.box_mesh(b.center, b.half_extents, b.matrix()),
+                         shift(box, now))
+
+    def _draw_mesh(self, prog: Any, look: str, settings: RenderSettings, spec: Any, now: float) -> None:
+        """A triangle mesh at its place at the simulation's time (culled from behind when closed,
+        both sides when open)."""
+        import moderngl
+
+        self._solid(look, spec.closed, False)
+        vbo, ibo = self._mesh_collider(spec)
+        vao = self._vao(look, "mesh", id(spec), lambda p: self.ctx.vertex_array(
+            p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
+            ibo, index_element_size=4, skip_errors=True))
+        model = np.eye(4)
+        model[:3, 3] = spec.track().at(now)
+        _set_matrix(prog, "u_model", model)
+        vao.render(moderngl.TRIANGLES)
 
     def _draw_wireframe(self, prog: Any, sim: ClothState, settings: RenderSettings,
                         buffers: _ClothBuffers) -> None:

@@ -35,8 +35,7 @@ _PER_OTHER_S = 10e-9  # each sphere, plane, capsule, box or wind
 
 def _point_substep_s(scene: Scene) -> float:
     sim = scene.simulation
-    others = (len(scene.spheres) + len(scene.planes) + len(scene.capsules) + len(scene.boxes)
-              + len(scene.winds))
+    others = len(scene.colliders) - len(scene.meshes) + len(scene.winds)
     return (_INTEGRATOR_S.get(sim.integrator, max(_INTEGRATOR_S.values()))
             + _SELF_COLLISION_S.get(sim.self_collision, max(_SELF_COLLISION_S.values()))
             + _PER_MESH_S * len(scene.meshes) + _PER_OTHER_S * others)

@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 
 
+from ..colliders import kinds_text
 from .solvers.frame import PASS_COLLIDERS, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF
 
 PASSES = ("forces+integrate", "self-collision", "colliders", "provot")
@@ -41,7 +42,7 @@ class Profiler:
         if sim._self_mode == 0:
             out["self-collision"] = "simulation.self_collision is false"
         if sim.n_colliders == 0:
-            out["colliders"] = "scene has no sphere, plane, capsule, box or mesh"
+            out["colliders"] = f"scene has no {kinds_text()}"
         if sim._kernel_args.wind is None:
             out["wind"] = "scene has no wind (or only still air)"
         if sim._kernel_args.pins is None:
@@ -71,7 +72,7 @@ class Profiler:
         sim = self.sim
         t = time.perf_counter
         n_colliders = sim.n_colliders
-        for substep in range(steps):
+        for _ in range(steps):
             for name, bit, on in (("forces+integrate", PASS_INTEGRATE, True),
                                   ("self-collision", PASS_SELF, sim._self_mode != 0),
                                   ("colliders", PASS_COLLIDERS, n_colliders > 0),
@@ -79,7 +80,7 @@ class Profiler:
                 if on:
                     before = sim.colliders_skipped
                     t0 = t()
-                    finished = sim.run_kernel(1, bit, size, substep)
+                    finished = sim.run_kernel(1, bit, size)
                     self._add(name, t() - t0)
                     if not finished:
                         return False

@@ -61,11 +61,17 @@ class Simulation:
         self._plane_on = np.zeros(len(self._planes), dtype=np.bool_)
         self._capsule_on = None if self._capsules is None else np.zeros(len(self._capsules), dtype=np.bool_)
         self._cuboid_on = None if self._cuboids is None else np.zeros(len(self._cuboids), dtype=np.bool_)
-        self._motion = pack_motion(scene)
         #: Top speed of the moving colliders (m/s): the blow-up guard allows the energy they give.
         self.collider_top_speed = top_speed(scene)
         # triangle meshes: packed and their grids built once (None without any)
         self._meshes = mesh_group(scene)
+        # Time as (time at the last re-plan, substeps since): a substep's time is computed from it,
+        # not summed up, so the same run gives the same times however its substeps are grouped.
+        # The one clock of everything that moves on its own (sim/clock.py).
+        self._clock = np.zeros(2)
+        self._clock_dt = self.dt
+        self._motion = pack_motion(scene, self._clock, self._clock_dt,
+                                   np.zeros((0, 6)) if self._meshes is None else self._meshes.pose)
         m = table_size(n)
         self._keys = np.zeros(n, dtype=np.int64)
         self._slots = np.zeros(n, dtype=np.int64)
@@ -78,10 +84,6 @@ class Simulation:
         self._boxes = np.zeros((CHUNKS, 6))
         self._skips = np.zeros(1, dtype=np.int64)
         self._pins = np.flatnonzero(self.pinned)
-        # Time as (time at the last re-plan, substeps since): a substep's time is computed from it,
-        # not summed up, so the same run gives the same times however its substeps are grouped.
-        self._clock = np.zeros(2)
-        self._clock_dt = self.dt
         self._tris: np.ndarray | None = None
         self._sync = team.new_sync()
         #: Members of the next frames' thread team (recovers after a failed roll call).
@@ -252,8 +254,8 @@ class Simulation:
                             zs, ks, cum, counted, tally, 2.0 * cloth.thickness, steps, 0)
         elif self._self_mode == MODE_GRID:
             grid = self.self_hash()
-        if self._meshes is not None:
-            self._meshes.clock[1] = dt
+        if self._motion is not None:
+            self._motion = self._motion._replace(dt=dt)
         if self.n_colliders > 0:
             margin = 0.0 if self._self_mode == 0 else 1.001 * (2.0 * cloth.thickness) / steps
             col = Colliders(self.free, self._spheres, self._planes, SURFACE_OFFSET, self._box, self._sphere_on,
@@ -310,23 +312,11 @@ class Simulation:
         (inf for a constant velocity). A cloth is not taken to be at rest before then, since a
         collider or a pin may still come and move it."""
         end = 0.0
-        motions = [spec.motion for kind in (self.scene.spheres, self.scene.planes, self.scene.capsules,
-                                            self.scene.boxes, self.scene.meshes) for spec in kind]
+        motions = [spec.motion for spec in self.scene.colliders]
         for motion in [*motions, self.scene.cloth.pin_motion]:
             if motion is not None:
                 end = max(end, float("inf") if motion.velocity is not None else motion.keyframes[-1][0])
         return end
-
-    def _start_clock(self, substep: int = 0) -> None:
-        """Tell the moving colliders and meshes the time of the next call's first substep."""
-        # the clock counts the substeps run so far, so ``substep`` is already in self.time
-        if self._motion is not None:
-            self._motion.clock[0] = self.time
-            self._motion.clock[1] = self.dt
-        if self._meshes is not None:  # the same (base, dt, substeps since) as wind and pins: exact
-            self._meshes.clock[0] = self._clock[0]
-            self._meshes.clock[1] = self._clock_dt
-            self._meshes.clock[2] = self._clock[1]
 
     # ------------------------------------------------------------------------------------------
     # Stepping
@@ -360,11 +350,10 @@ class Simulation:
         sim = self.scene.simulation
         return sim.integrator == "verlet" and sim.damping_mode == "spec"
 
-    def run_kernel(self, steps: int, passes: int = PASS_ALL, size: int = 1, substep: int = 0) -> bool:
-        """Run ``steps`` substeps of the frame kernel (only the ``passes`` bits) with a team of
-        ``size``, the first being substep ``substep`` of the current frame; False when the team
-        gave the frame up half-way (the state must be restored)."""
-        self._start_clock(substep)
+    def run_kernel(self, steps: int, passes: int = PASS_ALL, size: int = 1) -> bool:
+        """Run the next ``steps`` substeps of the frame kernel (only the ``passes`` bits) with a
+        team of ``size``; False when the team gave the frame up half-way (the state must be
+        restored)."""
         if not self._member_at:
             self._member_at, repel, collide = kernel_addresses(self._kernel_args, self._sync)
             plan = self._kernel_args
@@ -381,21 +370,20 @@ class Simulation:
         self.team.after(self._sync, size)
         return self._sync[team.ABORT] == 0
 
-    def _run(self, steps: int, saved: tuple | None = None, substep: int = 0) -> None:
-        """Advance ``steps`` substeps from substep ``substep`` of the frame. With ``saved`` (the
-        state before them), the fast path may use the thread team and, if the team gives up
-        half-way, restores ``saved`` and runs alone."""
+    def _run(self, steps: int, saved: tuple | None = None) -> None:
+        """Advance the next ``steps`` substeps. With ``saved`` (the state before them), the fast
+        path may use the thread team and, if the team gives up half-way, restores ``saved`` and
+        runs alone."""
         if not self.uses_spec_path:
             from .solvers import advance
 
-            self._start_clock(substep)
             advance(self, steps)
             self._clock[1] += steps
             return
         size = self.team.size() if saved is not None else 1
-        if not self.run_kernel(steps, PASS_ALL, size, substep):
+        if not self.run_kernel(steps, PASS_ALL, size):
             self._restore(saved)
-            self.run_kernel(steps, PASS_ALL, 1, substep)
+            self.run_kernel(steps, PASS_ALL, 1)
 
     def _restore(self, saved: tuple) -> None:
         self._pos[...] = saved[0]
@@ -425,7 +413,7 @@ class Simulation:
         self._restore(saved)
         bad, what = steps, "positions became non-finite"
         for sub in range(1, steps + 1):
-            self._run(1, None, sub - 1)
+            self._run(1, None)
             reason = sim_blow_up_reason(self)
             if reason is not None:
                 bad, what = sub, reason

@@ -120,8 +120,8 @@ class Wind(NamedTuple):
 
 class PinMotion(NamedTuple):
     """Moving pins (:mod:`clothsim.sim.passes.pins`): the pinned points, their rest positions (3, P),
-    the offset's track (:class:`clothsim.motion.Track` arrays), the substep and the clock: (time at
-    the last re-plan, substeps since), so substep s of a call starts at clock[0] + (clock[1] + s) dt."""
+    the offset's track (:class:`clothsim.motion.Track` arrays), the substep length and the
+    simulation's one clock (:mod:`clothsim.sim.clock`)."""
 
     pins: np.ndarray
     rest: np.ndarray

@@ -24,7 +24,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import ClothsimError, FieldError
-from ..scene import Scene, collider_json, scene_from_dict
+from ..colliders import KINDS
+from ..scene import Scene, scene_from_dict
 from ..validate import SceneWarning, shown
 
 __all__ = ["Distribution", "Run", "build_scene", "expand", "parse_set", "parse_values", "run_id",
@@ -265,12 +266,10 @@ def scene_json(scene: Scene) -> dict[str, Any]:
                                {"keyframes": [[t, list(p)] for t, p in motion.keyframes]})
     return {
         "cloth": cloth,
-        "sphere": [collider_json(s) for s in scene.spheres],
-        "plane": [collider_json(p) for p in scene.planes],
-        **({"capsule": [collider_json(c) for c in scene.capsules]} if scene.capsules else {}),
-        **({"box": [collider_json(b) for b in scene.boxes]} if scene.boxes else {}),
+        # every kind the scene has; the course's two always (its files name both)
+        **{kind.key: [kind.to_json(c) for c in getattr(scene, kind.attr)] for kind in KINDS
+           if getattr(scene, kind.attr) or kind.key in ("sphere", "plane")},
         **({"wind": [w.as_json() for w in scene.winds]} if scene.winds else {}),
-        **({"mesh": [m.as_json() for m in scene.meshes]} if scene.meshes else {}),
         "simulation": dataclasses.asdict(scene.simulation),
         **({"render": scene.render} if scene.render is not None else {}),
     }

@@ -15,8 +15,7 @@ from numba import njit
 
 from ...jit import CHUNKS, KERNEL
 from ..team import share
-from ..track import IEEE
-from ..track import track_at as offset_at
+from ..clock import track_at as offset_at
 
 
 @njit(inline="always", **KERNEL)
@@ -51,8 +50,3 @@ def pin_velocities(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, pm: tuple
         for ax in range(3):
             vel[ax, q] = (pos[ax, q] - last[ax, q]) * inv
 
-
-@njit(**IEEE)
-def substep_time(clock: np.ndarray, step: int, dt: float) -> float:
-    """Time (s) at the start of substep ``step`` of a call: clock = (base time, substeps since)."""
-    return clock[0] + (clock[1] + step) * dt

@@ -36,7 +36,8 @@ from ..passes.colliders import collide_part, member_bounds, merge_bounds, reach_
 from ..passes.provot import provot_band, provot_bands, provot_cut
 from ..passes.springs import gather_chunk, spring_job
 from .verlet import verlet_chunk
-from ..passes.pins import offset_at, pin_chunk, substep_time
+from ..clock import substep_time
+from ..passes.pins import offset_at, pin_chunk
 from ..passes.colliders.moving import moving, update_poses
 from ..passes.colliders.shapes import flags_for
 from ..passes.colliders.mesh import collide_meshes_chunk, mesh_flags, reachable_meshes
@@ -211,14 +212,14 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 skipped = reach_colliders(box, col, sphere_on, plane_on, capsule_on, cuboid_on, mov, col.capsules,
                                           col.cuboids)
                 if mesh is not None:
-                    skipped += reachable_meshes(mesh, box, substep, mesh_on)
+                    skipped += reachable_meshes(mesh, box, mesh_on)
                 if member == 0:
                     st.skips[0] += skipped
                 for c in range(lo, hi):
                     collide_part(pos, last, col, sphere_on, plane_on, capsule_on, cuboid_on, mov, col.capsules,
                                  col.cuboids, c)
                     if mesh is not None:
-                        call_native(mesh.collide, (pos, last, col.free, mesh, mesh_on, np.int64(substep), np.int64(c)))
+                        call_native(mesh.collide, (pos, last, col.free, mesh, mesh_on, np.int64(c)))
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
@@ -261,7 +262,7 @@ def _addresses(argtypes: tuple) -> tuple[int, int, int]:
     if mesh != types.none:
         # the mesh pass too: compiled here meanwhile, and kept out of the member's module
         collide = (st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
-                   col.types[col.fields.index("free")], mesh, types.Array(types.bool_, 1, "C"), i64, i64)
+                   col.types[col.fields.index("free")], mesh, types.Array(types.bool_, 1, "C"), i64)
 
     def meanwhile() -> None:
         if repel is not None:

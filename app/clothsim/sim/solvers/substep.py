@@ -22,7 +22,8 @@ from ...jit import EXACT, KERNEL
 from ..passes.wind import add_wind
 from ..passes.springs import accumulate_forces
 from ..passes.corrections import corrections
-from ..passes.pins import move_pins, pin_velocities, substep_time
+from ..clock import substep_time
+from ..passes.pins import move_pins, pin_velocities
 from .implicit import Implicit, implicit_update
 from .symplectic import Symplectic, symplectic_step
 from .verlet import VerletRate, verlet_rate_step

@@ -34,10 +34,9 @@ import numpy as np
 from numba import njit
 
 from ....jit import CHUNKS, EXACT
-from .meshgrid import DIMS_CELL0, DIMS_CLOSED, DIMS_K0, DIMS_K1, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
+from .meshgrid import DIMS_CELL0, DIMS_CLOSED, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
     INFO_HI, INFO_INV_H, INFO_LO
 from ...team import share
-from ...track import track_at as _position_at
 
 # closest-point features
 FACE, VERTEX_A, VERTEX_B, VERTEX_C, EDGE_AB, EDGE_BC, EDGE_CA = 0, 1, 2, 3, 4, 5, 6
@@ -258,22 +257,6 @@ def point_contact(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: floa
 
 
 @njit(**EXACT)
-def substep_times(mesh: tuple, step: int) -> tuple[float, float]:
-    """Start and end time of substep ``step`` of the current call: clock = (base time, substep
-    length, substeps since the base), so the time of a substep is the same whichever way the
-    substeps were grouped into calls (frames, single substeps, passes)."""
-    n = mesh.clock[2] + step
-    return mesh.clock[0] + n * mesh.clock[1], mesh.clock[0] + (n + 1.0) * mesh.clock[1]
-
-
-@njit(**EXACT)
-def mesh_shift(mesh: tuple, m: int, t: float, out: np.ndarray) -> None:
-    """Mesh ``m``'s translation at time ``t`` into ``out`` (3,)."""
-    k0, k1 = mesh.dims[m, DIMS_K0], mesh.dims[m, DIMS_K1]
-    _position_at(mesh.times[k0:k1], mesh.points[k0:k1], mesh.velocity[m], t, out)
-
-
-@njit(**EXACT)
 def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple, m: int,
                         before: np.ndarray, after: np.ndarray, brute: bool) -> None:
     """Collide the points ``free`` with mesh ``m`` translated by ``before`` at the substep's start
@@ -300,20 +283,17 @@ def mesh_flags(mesh: tuple | None) -> np.ndarray:
 
 
 @njit(**EXACT)
-def reachable_meshes(mesh: tuple | None, box: np.ndarray, step: int, on: np.ndarray) -> int:
+def reachable_meshes(mesh: tuple | None, box: np.ndarray, on: np.ndarray) -> int:
     """Mark the meshes the cloth's bounding box (current and last positions) may touch during
-    substep ``step`` of this call; returns how many were ruled out. A mesh's box, over both
+    this substep (at their poses); returns how many were ruled out. A mesh's box, over both
     translations of the substep and widened by the thickness, that misses the cloth's box can
     neither be crossed nor come within the thickness of a point, so skipping it is exact."""
     if mesh is None:
         return 0
     skipped = 0
-    t0, t1 = substep_times(mesh, step)
-    before = np.empty(3)
-    after = np.empty(3)
     for m in range(mesh.dims.shape[0]):
-        mesh_shift(mesh, m, t0, before)
-        mesh_shift(mesh, m, t1, after)
+        before = mesh.pose[m, :3]
+        after = mesh.pose[m, 3:]
         hit = True
         for c in range(3):
             lo = mesh.info[m, INFO_LO + c] + min(before[c], after[c]) - mesh.thickness
@@ -327,51 +307,43 @@ def reachable_meshes(mesh: tuple | None, box: np.ndarray, step: int, on: np.ndar
 
 @njit(**EXACT)
 def collide_meshes_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple | None, on: np.ndarray,
-                         step: int, c: int) -> None:
-    """Work item ``c`` (of CHUNKS) of the mesh pass in substep ``step`` of this call: the c-th part
-    of the free points against every reachable mesh, in scene order."""
+                         c: int) -> None:
+    """Work item ``c`` (of CHUNKS) of the mesh pass: the c-th part of the free points against
+    every reachable mesh at its pose, in scene order."""
     if mesh is None:
         return
     n = free.shape[0]
     f0, f1 = share(n, c, CHUNKS)
     part = free[f0:f1]
-    t0, t1 = substep_times(mesh, step)
-    before = np.empty(3)
-    after = np.empty(3)
     for m in range(mesh.dims.shape[0]):
         if on[m]:
-            mesh_shift(mesh, m, t0, before)
-            mesh_shift(mesh, m, t1, after)
-            collide_mesh_points(pos, last, part, mesh, m, before, after, False)
+            collide_mesh_points(pos, last, part, mesh, m, mesh.pose[m, :3], mesh.pose[m, 3:], False)
 
 
 @njit(**EXACT)
 def mesh_targets(pos: np.ndarray, last: np.ndarray, mesh: tuple, brute: bool) -> np.ndarray:
-    """Every point of (3, N) ``pos`` collided with every mesh (static, at time 0), on a copy: the
-    grid's answer, or the brute-force one (for tests)."""
+    """Every point of (3, N) ``pos`` collided with every mesh (held at the start of its current
+    pose), on a copy: the grid's answer, or the brute-force one (for tests)."""
     out = pos.copy()
     free = np.arange(pos.shape[1])
-    shift = np.empty(3)
     for m in range(mesh.dims.shape[0]):
-        mesh_shift(mesh, m, 0.0, shift)
+        shift = mesh.pose[m, :3]
         collide_mesh_points(out, last, free, mesh, m, shift, shift, brute)
     return out
 
 
 @njit(**EXACT)
 def mesh_corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple | None) -> int:
-    """The mesh pass of the integrators other than the spec's Verlet, one substep per call
-    (it advances ``mesh.clock[2]`` by one); returns the meshes skipped."""
+    """The mesh pass of the integrators other than the spec's Verlet, with the meshes at their
+    poses (the collider pass put them there); returns the meshes skipped."""
     if mesh is None:
         return 0
-    step = 0
     box = np.empty(6)
     for c in range(3):
         box[c] = min(pos[c].min(), last[c].min())
         box[3 + c] = max(pos[c].max(), last[c].max())
     on = mesh_flags(mesh)
-    skipped = reachable_meshes(mesh, box, step, on)
+    skipped = reachable_meshes(mesh, box, on)
     for c in range(CHUNKS):
-        collide_meshes_chunk(pos, last, free, mesh, on, step, c)
-    mesh.clock[2] += 1.0
+        collide_meshes_chunk(pos, last, free, mesh, on, c)
     return skipped

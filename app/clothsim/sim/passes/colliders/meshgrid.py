@@ -4,8 +4,10 @@ Every mesh of a scene goes into one :class:`MeshGroup` of flat arrays: its scale
 vertices (the translation, which may move, is applied to the cloth's points instead), triangles,
 the pseudo-normals that tell inside from outside (face normals, edge normals = the normalised sum
 of the two faces' normals, and angle-weighted vertex normals: Baerentzen and Aanaes, "Signed
-distance computation using the angle weighted pseudonormal", IEEE TVCG 2005), its translation
-track (:mod:`clothsim.motion`), and a uniform grid of its triangles.
+distance computation using the angle weighted pseudonormal", IEEE TVCG 2005), its pose (the
+translation at the substep's start and end: put there each substep for a moving mesh by
+:func:`clothsim.sim.passes.colliders.moving.update_poses`, like every moving collider), and a
+uniform grid of its triangles.
 
 The grid: cubic cells of edge ``h`` over the mesh's bounding box, ``h`` the mean of the
 triangles' largest bounding-box sides (grown until there are at most 8 cells per triangle, so a
@@ -22,10 +24,11 @@ from typing import NamedTuple
 import numpy as np
 
 from ....scene import Scene
+from ...clock import track_at
 
 #: Columns of ``MeshGroup.info`` (float64) and ``MeshGroup.dims`` (int64), one row per mesh.
 INFO_LO, INFO_HI, INFO_INV_H, INFO_FRICTION = 0, 3, 6, 7
-DIMS_TRI0, DIMS_TRI1, DIMS_CELL0, DIMS_N, DIMS_CLOSED, DIMS_K0, DIMS_K1 = 0, 1, 2, 3, 6, 7, 8
+DIMS_TRI0, DIMS_TRI1, DIMS_CELL0, DIMS_N, DIMS_CLOSED = 0, 1, 2, 3, 6
 #: Most cells per triangle the grid may have (see the module's docstring).
 MAX_CELLS_PER_TRIANGLE = 8
 
@@ -40,13 +43,10 @@ class MeshGroup(NamedTuple):
     enorm: np.ndarray  # (T, 3, 3) unit edge pseudo-normals, edge k = corner k -> corner k+1
     vnorm: np.ndarray  # (V, 3) unit angle-weighted vertex pseudo-normals
     info: np.ndarray  # (M, 8) bounding box lo, hi (local), 1/cell edge, friction
-    dims: np.ndarray  # (M, 9) first and end triangle, first cell, cells along x y z, closed, track range
+    dims: np.ndarray  # (M, 7) first and end triangle, first cell, cells along x y z, closed
     cell_start: np.ndarray  # (C + 1,) int64
     cell_tris: np.ndarray  # (E,) int64 triangle ids, cell by cell
-    times: np.ndarray  # (K,) every mesh's keyframe times, mesh after mesh
-    points: np.ndarray  # (K, 3) translations at those times
-    velocity: np.ndarray  # (M, 3) translation velocity after the last keyframe
-    clock: np.ndarray  # (3,) base time, substep length, substeps from the base to this call's start
+    pose: np.ndarray  # (M, 6) translation at the substep's start and at its end
     thickness: float
     #: address of the mesh pass compiled for this group (see :func:`clothsim.sim.solvers.frame.kernel_addresses`); 0 until known
     collide: int = 0
@@ -129,10 +129,12 @@ def mesh_group(scene: Scene) -> MeshGroup | None:
     """The scene's meshes packed for the kernels, or None when it has none."""
     if not scene.meshes:
         return None
-    verts, tris, fnorm, enorm, vnorm, starts, cells, times, points, vel = ([] for _ in range(10))
+    verts, tris, fnorm, enorm, vnorm, starts, cells = ([] for _ in range(7))
     info = np.zeros((len(scene.meshes), 8))
-    dims = np.zeros((len(scene.meshes), 9), dtype=np.int64)
-    nv = nt = nc = nk = 0
+    dims = np.zeros((len(scene.meshes), 7), dtype=np.int64)
+    pose = np.zeros((len(scene.meshes), 6))
+    here = np.empty(3)
+    nv = nt = nc = 0
     for m, spec in enumerate(scene.meshes):
         v = spec.local_vertices()
         t = spec.triangles
@@ -143,8 +145,11 @@ def mesh_group(scene: Scene) -> MeshGroup | None:
         info[m, INFO_HI:INFO_HI + 3] = hi
         info[m, INFO_INV_H] = inv_h
         info[m, INFO_FRICTION] = spec.friction
-        k = track.times.shape[0]
-        dims[m] = (nt, nt + t.shape[0], nc, *n, int(spec.closed), nk, nk + k)
+        dims[m] = (nt, nt + t.shape[0], nc, *n, int(spec.closed))
+        # where it stands at time 0 (a static mesh stays there), by the kernels' own evaluation
+        track_at(track.times, track.points, track.velocity, 0.0, here)
+        pose[m, :3] = here
+        pose[m, 3:] = here
         verts.append(v)
         tris.append(t + nv)
         fnorm.append(fn)
@@ -152,16 +157,11 @@ def mesh_group(scene: Scene) -> MeshGroup | None:
         vnorm.append(vn)
         starts.append(start[:-1] + sum(c.size for c in cells))
         cells.append(cell_tris + nt)
-        times.append(track.times)
-        points.append(track.points)
-        vel.append(track.velocity)
         nv += v.shape[0]
         nt += t.shape[0]
         nc += start.size - 1
-        nk += k
     cell_start = np.concatenate([*starts, [sum(c.size for c in cells)]]).astype(np.int64)
     thickness = scene.cloth.thickness
-    dt = 1.0 / (scene.simulation.frames_per_sec * scene.simulation.simulation_steps)
     all_verts = np.ascontiguousarray(np.concatenate(verts))
     all_tris = np.ascontiguousarray(np.concatenate(tris))
     corners = all_verts[all_tris]  # (T, 3, 3)
@@ -169,9 +169,7 @@ def mesh_group(scene: Scene) -> MeshGroup | None:
     return MeshGroup(all_verts, all_tris, tbox,
                      np.ascontiguousarray(np.concatenate(fnorm)), np.ascontiguousarray(np.concatenate(enorm)),
                      np.ascontiguousarray(np.concatenate(vnorm)), info, dims, cell_start,
-                     np.ascontiguousarray(np.concatenate(cells)), np.ascontiguousarray(np.concatenate(times)),
-                     np.ascontiguousarray(np.concatenate(points)).reshape(-1, 3), np.array(vel).reshape(-1, 3),
-                     np.array([0.0, dt, 0.0]), float(thickness))
+                     np.ascontiguousarray(np.concatenate(cells)), pose, float(thickness))
 
 
 def cells_per_mesh(group: MeshGroup) -> list[int]:

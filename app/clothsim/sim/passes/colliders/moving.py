@@ -1,13 +1,17 @@
-"""Moving colliders: each substep, every collider with a ``motion`` is put at its pose at the end of
-the substep, and its displacement over the substep (its *carry*) is recorded for the collision
-tests (see :mod:`clothsim.sim.passes.colliders.shapes`).
+"""The pose of every moving collider: each substep, every collider with a ``motion`` (a sphere,
+plane, capsule, box or triangle mesh) is put at its pose at the end of the substep, and its
+displacement over the substep (its *carry*) is recorded for the collision tests (see
+:mod:`clothsim.sim.passes.colliders.shapes`).
 
-All tracks are packed into one :class:`Motion` group of flat arrays (the kernels evaluate them with
-:func:`clothsim.motion.position_at`). A moving collider is a (kind, row) pair: the pose update
-translates that row's point columns (``base + position(t) - anchor``) and writes its carry, so
-another kind joins by adding its kind number, the columns it translates and where its carry goes.
-Only a scene with a moving collider builds the group; without it the group is ``None`` and the
-moving code is pruned from the kernels before typing.
+All tracks are packed into one :class:`Motion` group of flat arrays, evaluated at the one clock's
+times (:mod:`clothsim.sim.clock`, shared with the moving pins and the wind). A moving collider is
+a (kind, row) pair: the pose update translates that row's point columns (``base + position(t) -
+anchor``) and writes its carry; a mesh, whose triangles stay put in its own frame, gets its
+translation at the substep's start and end instead (``mesh_pose``, read by
+:mod:`clothsim.sim.passes.colliders.mesh`). Another kind joins by adding its kind number, the
+columns it translates and where its carry goes. Only a scene with a moving collider builds the
+group; without it the group is ``None`` and the moving code is pruned from the kernels before
+typing.
 
 Spheres and planes keep the course's row layout, so their carries live here
 (``sphere_carry``, ``plane_carry``); a moving scene tests them with the carry-aware variants below
@@ -25,10 +29,12 @@ from numba import njit
 
 from ....jit import KERNEL
 from .shapes import CAPSULE_CARRY, CUBOID_CARRY, samples
-from ...track import track_at as position_at
+from ....colliders import kind_number, scene_colliders
+from ...clock import substep_time, track_at as position_at
 
-#: Kind numbers of a moving collider (the order of the scene's collider kinds).
-KIND_SPHERE, KIND_PLANE, KIND_CAPSULE, KIND_CUBOID = 0, 1, 2, 3
+#: Kind numbers of a moving collider: places in the registry of kinds (:data:`clothsim.colliders.KINDS`).
+KIND_SPHERE, KIND_PLANE, KIND_CAPSULE, KIND_CUBOID, KIND_MESH = (kind_number(k) for k in ("sphere", "plane", "capsule",
+                                                                                        "box", "mesh"))
 
 
 class Motion(NamedTuple):
@@ -47,28 +53,37 @@ class Motion(NamedTuple):
     anchor: np.ndarray
     #: (M, 6) the unmoved point columns of its row (a capsule's a and b; others the first three)
     base: np.ndarray
-    #: [time at the call's first substep, substep length], written before each call
+    #: the simulation's clock (see :mod:`clothsim.sim.clock`) and the substep length
     clock: np.ndarray
+    dt: float
     #: (2, 3) work space for the pose update
     scratch: np.ndarray
     sphere_carry: np.ndarray
     plane_carry: np.ndarray
+    #: (meshes, 6) each mesh's translation at the start and at the end of the substep (the
+    #: mesh group's ``pose``: static meshes' rows are set once, at packing)
+    mesh_pose: np.ndarray
 
 
-def pack_motion(scene: Any) -> Motion | None:
-    """The :class:`Motion` group of ``scene``'s moving colliders, or None when nothing moves."""
-    groups = ((KIND_SPHERE, scene.spheres), (KIND_PLANE, scene.planes), (KIND_CAPSULE, scene.capsules),
-              (KIND_CUBOID, scene.boxes))
+def pack_motion(scene: Any, clock: np.ndarray, dt: float, mesh_pose: np.ndarray) -> Motion | None:
+    """The :class:`Motion` group of ``scene``'s moving colliders, or None when nothing moves.
+    ``clock`` is the simulation's clock and ``mesh_pose`` the mesh group's pose rows (every mesh
+    of the scene, moving or not; (0, 6) without meshes)."""
     tracks, kinds, rows, anchors, bases = [], [], [], [], []
-    for kind, specs in groups:
-        for r, spec in enumerate(specs):
-            if spec.motion is None:
-                continue
-            tracks.append(spec.motion.track(spec.anchor))
-            kinds.append(kind)
-            rows.append(r)
-            anchors.append(spec.anchor)
-            bases.append((*spec.a, *spec.b) if kind == KIND_CAPSULE else (*spec.anchor, 0.0, 0.0, 0.0))
+    for entry, r, spec in scene_colliders(scene):
+        if spec.motion is None:
+            continue
+        kind = entry.number
+        kinds.append(kind)
+        rows.append(r)
+        if kind == KIND_MESH:  # a mesh's track is its translation (its vertices stay put)
+            tracks.append(spec.track())
+            anchors.append((0.0, 0.0, 0.0))
+            bases.append((0.0,) * 6)
+            continue
+        tracks.append(spec.motion.track(spec.anchor))
+        anchors.append(spec.anchor)
+        bases.append((*spec.a, *spec.b) if kind == KIND_CAPSULE else (*spec.anchor, 0.0, 0.0, 0.0))
     if not tracks:
         return None
     ends = np.cumsum([len(t.times) for t in tracks])
@@ -76,14 +91,14 @@ def pack_motion(scene: Any) -> Motion | None:
     return Motion(np.concatenate([t.times for t in tracks]), np.concatenate([t.points for t in tracks]), span,
                   np.array([t.velocity for t in tracks], dtype=np.float64), np.array(kinds, dtype=np.int64),
                   np.array(rows, dtype=np.int64), np.array(anchors, dtype=np.float64),
-                  np.array(bases, dtype=np.float64), np.zeros(2), np.zeros((2, 3)),
-                  np.zeros((len(scene.spheres), 3)), np.zeros((len(scene.planes), 3)))
+                  np.array(bases, dtype=np.float64), clock, dt, np.zeros((2, 3)),
+                  np.zeros((len(scene.spheres), 3)), np.zeros((len(scene.planes), 3)), mesh_pose)
 
 
 def top_speed(scene: Any) -> float:
     """The highest speed (m/s) any of ``scene``'s colliders ever moves at (0 when none moves)."""
     top = 0.0
-    for spec in (*scene.colliders, *scene.meshes):
+    for spec in scene.colliders:
         if spec.motion is None:
             continue
         track = spec.motion.track()  # a speed: the same from any start
@@ -142,9 +157,8 @@ def update_poses(motion: Motion | None, spheres: np.ndarray, planes: np.ndarray,
     record its displacement over that substep (its carry)."""
     if motion is None:
         return
-    dt = motion.clock[1]
-    t0 = motion.clock[0] + substep * dt
-    t1 = t0 + dt
+    t0 = substep_time(motion.clock, substep, motion.dt)
+    t1 = substep_time(motion.clock, substep + 1, motion.dt)
     p0 = motion.scratch[0]
     p1 = motion.scratch[1]
     for m in range(motion.kind.shape[0]):
@@ -152,14 +166,19 @@ def update_poses(motion: Motion | None, spheres: np.ndarray, planes: np.ndarray,
         b = motion.span[m, 1]
         position_at(motion.times[a:b], motion.points[a:b], motion.velocity[m], t0, p0)
         position_at(motion.times[a:b], motion.points[a:b], motion.velocity[m], t1, p1)
+        kind = motion.kind[m]
+        r = motion.row[m]
+        if kind == KIND_MESH:
+            for c in range(3):
+                motion.mesh_pose[r, c] = p0[c]
+                motion.mesh_pose[r, 3 + c] = p1[c]
+            continue
         x = p1[0] - motion.anchor[m, 0]
         y = p1[1] - motion.anchor[m, 1]
         z = p1[2] - motion.anchor[m, 2]
         cx = p1[0] - p0[0]
         cy = p1[1] - p0[1]
         cz = p1[2] - p0[2]
-        kind = motion.kind[m]
-        r = motion.row[m]
         base = motion.base[m]
         if kind == KIND_SPHERE:
             spheres[r, 0] = base[0] + x
