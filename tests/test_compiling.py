@@ -138,3 +138,52 @@ def test_a_change_to_any_kernel_module_makes_every_cached_kernel_stale(tmp_path:
     notes = site / "clothsim" / "README.txt"  # a file without kernels changes nothing
     notes.write_text("x")
     assert hits_and_misses() == (1, 0)
+
+
+_CONCURRENT_PROBE = """
+import sys, time
+import numpy as np
+from clothsim.sim.rest import max_displacement
+dtype = np.dtype(sys.argv[1])
+start = float(sys.argv[2])
+while time.time() < start:  # every process compiles at the same moment
+    time.sleep(0.001)
+a = np.zeros((3, 4), dtype=dtype)
+b = np.ones((3, 4), dtype=dtype)
+print(max_displacement(a, b))
+"""
+
+_LOAD_PROBE = """
+import numpy as np
+from clothsim.sim.rest import max_displacement
+for dtype in ("f8", "f4", "i8", "i4", "i2", "u4"):
+    assert abs(max_displacement(np.zeros((3, 4), dtype=dtype), np.ones((3, 4), dtype=dtype)) - 3 ** 0.5) < 1e-6
+s = max_displacement.stats
+print(sum(s.cache_hits.values()), sum(s.cache_misses.values()))
+"""
+
+
+def test_processes_compiling_one_kernel_at_once_leave_a_cache_every_process_can_load(tmp_path: Path) -> None:
+    # Six processes compile six signatures of one kernel into one cache at the same moment (a
+    # cold start of the suite's workers or of a sweep's): afterwards a seventh loads all six from
+    # the cache and each computes what it should. (Without the lock around Numba's save, one
+    # run in three of the four-signature version failed here: two signatures shared a data file.)
+    import time
+
+    site = tmp_path / "site"
+    shutil.copytree(REPO / "app" / "clothsim", site / "clothsim",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "PYTHONPATH")}
+    env["PYTHONPATH"] = str(site)
+    start = time.time() + 8.0
+    procs = [subprocess.Popen([sys.executable, "-c", _CONCURRENT_PROBE, kind, str(start)], env=env, cwd=tmp_path,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for kind in ("f8", "f4", "i8", "i4", "i2", "u4")]
+    for p in procs:
+        out, err = p.communicate(timeout=120)
+        assert p.returncode == 0, err
+        assert abs(float(out) - 3 ** 0.5) < 1e-6
+    done = subprocess.run([sys.executable, "-c", _LOAD_PROBE], capture_output=True, text=True, env=env,
+                          cwd=tmp_path, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["6", "0"]  # all six loaded, none compiled again

@@ -138,8 +138,8 @@ def test_grid_gives_the_same_contacts_as_brute_force(tmp_path):
                       (box_obj(0.2, 0.1, 0.3, drop_top=True), {"translate": [0.5, 0.5, 0.5], "scale": 1.5})):
         scene = load_scene(_scene(tmp_path, obj, {"path": "shape.obj", "friction": 0.25, **mesh}))
         group = mesh_group(scene)
-        lo = group.verts.min(axis=0) + group.points[0] - 0.05
-        hi = group.verts.max(axis=0) + group.points[0] + 0.05
+        lo = group.verts.min(axis=0) + group.pose[0, :3] - 0.05
+        hi = group.verts.max(axis=0) + group.pose[0, :3] + 0.05
         n = 20000
         last = rng.uniform(lo, hi, (n, 3))
         pos = last + rng.normal(0.0, 0.01, (n, 3))

@@ -13,10 +13,11 @@ carries a zero-divisor check that raises, and that branch stops LLVM from vector
 
 import os
 
-from .internals import install_package_stamp
+from .internals import install_package_stamp, install_shared_cache
 
 # Before any kernel is decorated: every module that defines one imports this one first.
 install_package_stamp()
+install_shared_cache()
 
 # Numba runs PARALLEL kernels on libgomp, whose idle workers spin 300,000 pause instructions
 # (about 10 ms on this machine's CPUs) before sleeping. A frame's parallel regions follow each

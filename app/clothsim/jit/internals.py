@@ -23,8 +23,10 @@ module, or the user-wide cache), unchanged. The digest reads about 20 files once
 
 from __future__ import annotations
 
+import fcntl
 import functools
 import hashlib
+import os
 import platform
 import time
 from pathlib import Path
@@ -85,6 +87,52 @@ def install_package_stamp() -> None:
     bases = [c for c in impl._locator_classes if mixin is not None and issubclass(c, mixin)]
     impl._locator_classes = [_stamped(c) for c in bases] + list(impl._locator_classes)
     impl._clothsim_stamped = True
+
+
+def _locked_save(self: Any, key: Any, data: Any) -> None:
+    """Numba's ``IndexDataCacheFile.save``, safe between processes: under an exclusive lock on a
+    file beside the index, the index is read afresh, the kernel written, and only then the index
+    entry naming it.
+
+    Numba's own save reads the index, picks the first free data-file number, writes the index and
+    then the data, with no lock: two processes compiling two signatures of one kernel at once (the
+    test suite's workers, a sweep's local workers on a cold cache) both took number 1, and the
+    index then named one signature's code with the other's data, which a third process loaded and
+    failed to type. Writing the data before the entry also keeps a reader from meeting an entry
+    whose file still holds a kernel of an older stamp.
+    """
+    try:
+        fd = os.open(self._index_path + ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError:  # a folder where no lock file can be made: Numba's own save
+        _numba_save(self, key, data)
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        overloads = self._load_index()
+        name = overloads.get(key)
+        if name is None:
+            taken = set(overloads.values())
+            number = 1
+            while self._data_name(number) in taken:
+                number += 1
+            name = self._data_name(number)
+        self._save_data(name, data)
+        if overloads.get(key) != name:
+            overloads[key] = name
+            self._save_index(overloads)
+    finally:
+        os.close(fd)  # releases the lock
+
+
+_numba_save = caching.IndexDataCacheFile.save
+
+
+def install_shared_cache() -> None:
+    """Make Numba's on-disk cache safe for processes that compile at the same time (once)."""
+    if getattr(caching.IndexDataCacheFile, "_clothsim_locked", False):
+        return
+    caching.IndexDataCacheFile.save = _locked_save
+    caching.IndexDataCacheFile._clothsim_locked = True
 
 
 @intrinsic
@@ -149,6 +197,9 @@ def missing_private_api() -> list[str]:
         missing.append("numba.core.caching.CacheImpl._locator_classes")
     if getattr(caching, "_SourceFileBackedLocatorMixin", None) is None:
         missing.append("numba.core.caching._SourceFileBackedLocatorMixin")
+    for name in ("_load_index", "_save_index", "_save_data", "_data_name"):
+        if not hasattr(caching.IndexDataCacheFile, name):
+            missing.append(f"numba.core.caching.IndexDataCacheFile.{name}")
     for name in ("_get_arg_packer", "_get_return_status", "get_function_type", "get_return_type"):
         if not hasattr(CPUCallConv, name):
             missing.append(f"numba.core.callconv.CPUCallConv.{name}")

@@ -1,0 +1,110 @@
+"""The registry of collider kinds drives every per-kind table, and every kind moves by one pose
+update read from the simulation's one clock."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from clothsim.colliders import BY_KEY, KINDS, kind_number, scene_colliders
+from clothsim.errors import SceneError
+from clothsim.scene import scene_from_dict
+from conftest import SCENES
+
+KEYS = ["sphere", "plane", "capsule", "box", "mesh"]
+
+
+def _scene(moving: bool) -> dict:
+    motion = {"keyframes": [[0.0, [0.0, 0.0, 0.0]], [0.05, [0.02, 0.01, 0.0]]]}
+
+    def moved(obj: dict, at: list[float]) -> dict:
+        if moving:
+            obj["motion"] = {"keyframes": [[t, [a + d for a, d in zip(at, p)]] for t, p in motion["keyframes"]]}
+        return obj
+
+    return {
+        "cloth": {"width": 1.0, "height": 1.0, "num_width_points": 8, "num_height_points": 8, "thickness": 0.01,
+                  "orientation": "horizontal", "damping": 0.2, "density": 150.0, "ks": 5000.0, "pinned": []},
+        "sphere": moved({"origin": [0.5, -2.0, 0.5], "radius": 0.2, "friction": 0.3}, [0.5, -2.0, 0.5]),
+        "plane": moved({"point": [0.0, -3.0, 0.0], "normal": [0, 1, 0], "friction": 0.5}, [0.0, -3.0, 0.0]),
+        "capsule": moved({"a": [0.2, -2.0, 0.2], "b": [0.8, -2.0, 0.2], "radius": 0.05, "friction": 0.2},
+                         [0.5, -2.0, 0.2]),
+        "box": moved({"center": [0.5, -2.5, 0.5], "half_extents": [0.1, 0.1, 0.1], "friction": 0.1},
+                     [0.5, -2.5, 0.5]),
+        "mesh": moved({"path": str(SCENES / "torus.obj"), "scale": 0.2, "translate": [0.5, -2.0, 0.8],
+                       "friction": 0.3}, [0.5, -2.0, 0.8]),
+        "simulation": {"simulation_steps": 7},
+    }
+
+
+def test_the_registry_lists_every_kind_once_in_scene_order() -> None:
+    assert [k.key for k in KINDS] == KEYS
+    assert [kind_number(k) for k in KEYS] == list(range(len(KEYS)))
+    assert set(BY_KEY) == set(KEYS)
+
+
+def test_every_per_kind_table_covers_exactly_the_registry() -> None:
+    from clothsim.exporters.geometry import COLLIDER_KINDS
+    from clothsim.render.renderer import Renderer
+    from clothsim.sim.passes.colliders import moving
+
+    assert list(COLLIDER_KINDS) == KEYS
+    for key in KEYS:
+        assert callable(getattr(Renderer, f"_draw_{key}")), key
+    assert [moving.KIND_SPHERE, moving.KIND_PLANE, moving.KIND_CAPSULE, moving.KIND_CUBOID,
+            moving.KIND_MESH] == [kind_number(k) for k in KEYS]
+
+
+def test_the_loader_reads_every_kind_and_names_them_for_an_unknown_key() -> None:
+    scene = scene_from_dict(_scene(True), "k.json")
+    assert [k.key for k, _, _ in scene_colliders(scene)] == KEYS
+    assert len(scene.colliders) == 5 and scene.moving
+    with pytest.raises(SceneError) as err:
+        scene_from_dict({**_scene(False), "cylinder": {}}, "k.json")
+    assert "expected one of: cloth, sphere, plane, capsule, box, mesh, wind, simulation, render" in str(err.value)
+
+
+def test_the_scene_writer_round_trips_every_kind() -> None:
+    from clothsim.sweeps.params import scene_json
+
+    scene = scene_from_dict(_scene(True), "k.json")
+    again = scene_from_dict(scene_json(scene), "again.json")
+    for kind in KINDS:
+        a, b = getattr(scene, kind.attr), getattr(again, kind.attr)
+        assert [kind.to_json(x) for x in a] == [kind.to_json(x) for x in b], kind.key
+
+
+@pytest.mark.parametrize("integrator", ["verlet", "symplectic_euler"])
+def test_every_kind_is_posed_from_the_one_clock(integrator: str) -> None:
+    # After a frame every moving collider stands where its track puts it at the simulation's
+    # time, bit for bit: the kernels' clock and the Python one are the same clock.
+    from clothsim.sim import Simulation
+
+    data = _scene(True)
+    data["simulation"]["integrator"] = integrator
+    sim = Simulation(scene_from_dict(data, "k.json"))
+    sim.step(2)
+    t = sim.time
+    scene = sim.scene
+    for spec, rows in ((scene.spheres[0], sim._spheres), (scene.planes[0], sim._planes), (scene.boxes[0], sim._cuboids)):
+        anchor = np.asarray(spec.anchor)
+        assert np.array_equal(rows[0, :3], anchor + (spec.motion.track(spec.anchor).at(t) - anchor))
+    capsule = scene.capsules[0]
+    shift = capsule.motion.track(capsule.anchor).at(t) - np.asarray(capsule.anchor)
+    assert np.array_equal(sim._capsules[0, :3], np.asarray(capsule.a) + shift)
+    mesh = scene.meshes[0]
+    assert np.array_equal(sim._meshes.pose[0, 3:], mesh.track().at(t))
+    before = scene.meshes[0].track().at(t - sim.dt)
+    assert np.allclose(sim._meshes.pose[0, :3], before, rtol=0, atol=1e-15)
+
+
+def test_static_colliders_are_posed_once_and_stay() -> None:
+    from clothsim.sim import Simulation
+
+    sim = Simulation(scene_from_dict(_scene(False), "k.json"))
+    pose = sim._meshes.pose.copy()
+    rows = sim._spheres.copy()
+    sim.step(1)
+    assert sim._kernel_args.mov is None
+    assert np.array_equal(sim._meshes.pose, pose) and np.array_equal(pose[0, :3], [0.5, -2.0, 0.8])
+    assert np.array_equal(sim._spheres, rows)
