@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 import numpy as np
 
@@ -20,11 +20,15 @@ from ..errors import ClothsimError
 from ..scene import Scene, available_memory
 from ..sim.passes.colliders.moving import posed, shift
 from . import mesh, textures
-from .camera import Camera, default_position, default_target
+from .camera import FLIP_Y, Camera, default_position, default_target
 from .context import create_context
-from .programs import Programs, set_uniform
+from .programs import Programs, set_matrix, set_uniform
 from .settings import (SHADERS, USES_COLOR_TEXTURE, USES_CUBEMAP, USES_HEIGHT_MAP, USES_TANGENTS,
                        RenderSettings, srgb_to_linear)
+
+if TYPE_CHECKING:
+    from .channels import Channels
+    from .views import ViewCamera
 
 GL_SRGB8_ALPHA8 = 0x8C43
 # Texture units, fixed per sampler so that binding order never matters.
@@ -86,6 +90,7 @@ class _ClothBuffers:
     uv_vbo: Any
     tri_ibo: Any
     tri_count: int
+    next_vbo: Any = None  # the data channels' next positions (made on first use)
 
 
 class Renderer:
@@ -130,14 +135,16 @@ class Renderer:
         self._vaos: dict[tuple[Any, ...], Any] = {}
         self._textures: dict[tuple[Any, ...], Any] = {}
         self._settings_for: tuple[Scene | None, RenderSettings | None] = (None, None)
+        self._channels: Any = None  # the data pass's float targets (channels.py), made on first use
         self.timings: dict[str, float] = dict.fromkeys(STAGES, 0.0)
 
     # -- public --------------------------------------------------------------------------------
     def render(self, simulation: ClothState, shader: str | None = None,
-               settings: RenderSettings | None = None) -> np.ndarray:
+               settings: RenderSettings | None = None, camera: Camera | None = None) -> np.ndarray:
         """Draw ``simulation``'s current state; returns a new (height, width, 3) uint8 array.
 
-        ``settings`` defaults to the scene's ``render`` object; ``shader`` overrides its look.
+        ``settings`` defaults to the scene's ``render`` object; ``shader`` overrides its look;
+        ``camera`` overrides the settings' camera (a dataset's fixed views).
         The image size is the renderer's, whatever ``settings.size`` says.
         """
         settings = settings or self.settings_for(simulation.scene)
@@ -155,7 +162,7 @@ class Renderer:
             t1 = time.perf_counter()
             buffers.vbo.write(buffers.vertices)
             t2 = time.perf_counter()
-            self._draw(simulation, look, settings, buffers)
+            self._draw(simulation, look, settings, buffers, camera)
             if self.profile:
                 self.ctx.finish()
             t3 = time.perf_counter()
@@ -163,6 +170,14 @@ class Renderer:
             t4 = time.perf_counter()
         self.timings = {"mesh": t1 - t0, "upload": t2 - t1, "draw": t3 - t2, "readback": t4 - t3}
         return image
+
+    def render_channels(self, simulation: ClothState, view: ViewCamera,
+                        next_positions: np.ndarray | None = None) -> Channels:
+        """Depth, optical flow to ``next_positions``, mask and normals of ``simulation``'s
+        current state seen from ``view`` (of this renderer's size); see :mod:`.channels`."""
+        from .channels import draw_channels
+
+        return draw_channels(self, simulation, view, next_positions)
 
     def settings_for(self, scene: Scene) -> RenderSettings:
         """The scene's render settings (validated once per scene object)."""
@@ -202,6 +217,9 @@ class Renderer:
         """Free every GL object and the context."""
         with self.ctx:
             self.programs.release()
+            if self._channels is not None:
+                self._channels.release()
+                self._channels = None
             self._release_framebuffers()
         self.ctx.release()
 
@@ -266,8 +284,9 @@ class Renderer:
         if b is not None and (b.nw, b.nh) == (nw, nh):
             return b
         if b is not None:
-            for obj in (b.vbo, b.uv_vbo, b.tri_ibo):
-                obj.release()
+            for obj in (b.vbo, b.uv_vbo, b.tri_ibo, b.next_vbo):
+                if obj is not None:
+                    obj.release()
             self._drop_vaos("cloth")
         vertices = np.zeros((nw * nh, mesh.CLOTH_FLOATS), dtype=np.float32)
         tris = mesh.cloth_triangles(nw, nh)
@@ -279,6 +298,18 @@ class Renderer:
             tri_count=int(tris.size),
         )
         return self._cloth
+
+    def _next_buffer(self, buffers: _ClothBuffers) -> Any:
+        if buffers.next_vbo is None:
+            buffers.next_vbo = self.ctx.buffer(reserve=buffers.nw * buffers.nh * 12, dynamic=True)
+        return buffers.next_vbo
+
+    def _channel_targets(self) -> Any:
+        if self._channels is None:
+            from .channels import _Targets
+
+            self._channels = _Targets(self.ctx, self.width, self.height)
+        return self._channels
 
     def _spring_buffer(self, springs: Springs) -> None:
         if self._springs is springs:
@@ -324,7 +355,7 @@ class Renderer:
         vao = self._vao(look, "shape", key, lambda p: self.ctx.vertex_array(
             p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
             ibo, index_element_size=4, skip_errors=True))
-        _set_matrix(prog, "u_model", _translation(offset))
+        set_matrix(prog, "u_model", _translation(offset))
         vao.render(moderngl.TRIANGLES)
 
     def _drop_vaos(self, geometry: str) -> None:
@@ -372,7 +403,8 @@ class Renderer:
         return self._textures[key]
 
     # -- drawing -----------------------------------------------------------------------------
-    def _draw(self, sim: ClothState, look: str, settings: RenderSettings, buffers: _ClothBuffers) -> None:
+    def _draw(self, sim: ClothState, look: str, settings: RenderSettings, buffers: _ClothBuffers,
+              camera: Camera | None = None) -> None:
         import moderngl
 
         ctx = self.ctx
@@ -384,8 +416,7 @@ class Renderer:
         bg = settings.background
         ctx.clear(bg[0], bg[1], bg[2], 1.0, depth=1.0)  # the framebuffer holds sRGB values
 
-        scene = sim.scene
-        cam = self.camera(sim, settings)
+        cam = camera if camera is not None else self.camera(sim, settings)
         prog = self.programs.get(look)
         self._set_common_uniforms(prog, look, cam, settings)
         ident = np.eye(4)
@@ -397,7 +428,7 @@ class Renderer:
                 p, [(buffers.vbo, "3f 3f 3f", "in_position", "in_normal", "in_tangent"),
                     (buffers.uv_vbo, "2f", "in_uv")],
                 buffers.tri_ibo, index_element_size=4, skip_errors=True))
-            _set_matrix(prog, "u_model", ident)
+            set_matrix(prog, "u_model", ident)
             vao.render(moderngl.TRIANGLES)
 
         if look == "wireframe":
@@ -405,6 +436,25 @@ class Renderer:
             ctx.wireframe = True
             dim = tuple(0.45 * c for c in srgb_to_linear(settings.color))
             set_uniform(prog, "u_color", (*dim, 1.0))
+        self._draw_colliders(prog, look, sim, settings)
+        ctx.wireframe = False
+        ctx.copy_framebuffer(self._fbo, self._ms_fbo)  # resolves the multisampled image
+
+    def _draw_colliders(self, prog: Any, look: str, sim: ClothState, settings: RenderSettings,
+                        mark: Callable[[int], None] | None = None) -> None:
+        """Every collider, in the scene's order: spheres, capsules, meshes, planes, boxes.
+        ``mark(k)`` is called before the k-th (from 0) is drawn (the data pass's mask ids)."""
+        import moderngl
+
+        ctx = self.ctx
+        scene = sim.scene
+        drawn = [0]
+
+        def next_one() -> None:
+            if mark is not None:
+                mark(drawn[0])
+            drawn[0] += 1
+
         if look != "wireframe":
             # A sphere's far side is hidden by its near side (seen from outside): culling it
             # halves the triangles rasterised, and small triangles dominate llvmpipe's MSAA cost.
@@ -419,15 +469,17 @@ class Renderer:
                 ibo, index_element_size=4, skip_errors=True))
             model = np.diag([*(3 * [sphere.radius * SPHERE_DRAW_SCALE]), 1.0])
             model[:3, 3] = posed(sphere, now).origin
-            _set_matrix(prog, "u_model", model)
+            set_matrix(prog, "u_model", model)
+            next_one()
             vao.render(moderngl.TRIANGLES)
         for capsule in scene.capsules:
             # drawn thinner for the reason spheres are (see SPHERE_DRAW_SCALE)
             key = ("capsule", capsule.a, capsule.b, capsule.radius, settings.sphere_resolution)
+            next_one()
             self._draw_shape(prog, look, key, lambda c=capsule: mesh.capsule_mesh(
                 c.a, c.b, c.radius * SPHERE_DRAW_SCALE, *settings.sphere_resolution), shift(capsule, now))
         ctx.disable(moderngl.CULL_FACE)
-        self._draw_meshes(prog, look, sim)
+        self._draw_meshes(prog, look, sim, next_one)
         if scene.planes or scene.boxes:
             # Cloth resting on a plane or a box face sits 0.0001 above it; push them back in
             # depth so the two never fight for the same pixels.
@@ -437,18 +489,18 @@ class Renderer:
                 vao = self._vao(look, "plane", (plane.point, plane.normal), lambda p: ctx.vertex_array(
                     p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
                     ibo, index_element_size=4, skip_errors=True))
-                _set_matrix(prog, "u_model", _translation(shift(plane, now)))
+                set_matrix(prog, "u_model", _translation(shift(plane, now)))
+                next_one()
                 vao.render(moderngl.TRIANGLES)
             if look != "wireframe":
                 ctx.enable(moderngl.CULL_FACE)
             for box in scene.boxes:
                 key = ("box", box.center, box.half_extents, box.rotation)
+                next_one()
                 self._draw_shape(prog, look, key, lambda b=box: mesh.box_mesh(b.center, b.half_extents, b.matrix()),
                                  shift(box, now))
             ctx.disable(moderngl.CULL_FACE)
             ctx.polygon_offset = (0.0, 0.0)
-        ctx.wireframe = False
-        ctx.copy_framebuffer(self._fbo, self._ms_fbo)  # resolves the multisampled image
 
     def _mesh_collider(self, spec: Any) -> tuple[Any, Any]:
         entry = self._meshes.get(id(spec))
@@ -466,7 +518,7 @@ class Renderer:
             self._meshes[id(spec)] = entry
         return entry[1], entry[2]
 
-    def _draw_meshes(self, prog: Any, look: str, sim: ClothState) -> None:
+    def _draw_meshes(self, prog: Any, look: str, sim: ClothState, before: Callable[[], None] | None = None) -> None:
         """Triangle-mesh colliders at their place at the simulation's time (culled from behind
         when closed, both sides when open)."""
         import moderngl
@@ -478,9 +530,11 @@ class Renderer:
                 ibo, index_element_size=4, skip_errors=True))
             model = np.eye(4)
             model[:3, 3] = spec.track().at(getattr(sim, "time", 0.0))
-            _set_matrix(prog, "u_model", model)
+            set_matrix(prog, "u_model", model)
             if spec.closed and look != "wireframe":
                 self.ctx.enable(moderngl.CULL_FACE)
+            if before is not None:
+                before()
             vao.render(moderngl.TRIANGLES)
             self.ctx.disable(moderngl.CULL_FACE)
 
@@ -491,7 +545,7 @@ class Renderer:
         self._spring_buffer(sim.live_springs)
         vao = self._vao("wireframe", "springs", None, lambda p: self.ctx.vertex_array(
             p, [(buffers.vbo, "3f 24x", "in_position")], self._spring_ibo, index_element_size=4))
-        _set_matrix(prog, "u_model", np.eye(4))
+        set_matrix(prog, "u_model", np.eye(4))
         if settings.color_by_family:
             for family, first, count in self._spring_ranges:
                 set_uniform(prog, "u_color", (*srgb_to_linear(FAMILY_COLORS[family]), 1.0))
@@ -503,7 +557,7 @@ class Renderer:
     def _set_common_uniforms(self, prog: Any, look: str, cam: Camera, settings: RenderSettings) -> None:
         # Rendered upside down (clip-space y negated, winding flipped to match in _draw), so
         # the framebuffer's bottom-up rows read back as a top-down image with no copy.
-        _set_matrix(prog, "u_view_projection", _FLIP_Y @ cam.view_projection(self.width / self.height))
+        set_matrix(prog, "u_view_projection", FLIP_Y @ cam.view_projection(self.width / self.height))
         set_uniform(prog, "u_cam_pos", tuple(float(c) for c in cam.position))
         set_uniform(prog, "u_light_pos", settings.light_position)
         set_uniform(prog, "u_light_intensity", settings.light_intensity)
@@ -536,15 +590,7 @@ class Renderer:
         return image
 
 
-_FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])
-
-
 def _translation(offset: np.ndarray) -> np.ndarray:
     m = np.eye(4)
     m[:3, 3] = offset
     return m
-
-
-def _set_matrix(prog: Any, name: str, m: np.ndarray) -> None:
-    # NumPy matrices are row-major; GL reads uniforms column by column.
-    set_uniform(prog, name, np.ascontiguousarray(m.T, dtype=np.float32).tobytes())
