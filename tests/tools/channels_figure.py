@@ -1,4 +1,4 @@
-"""Draw docs/dataset_channels.png: one run's channels side by side from two of its views.
+"""Draw docs/images/dataset_channels.png: one run's channels side by side from two of its views.
 
     .venv/bin/python tests/tools/channels_figure.py [OUT.png]
 
@@ -88,4 +88,4 @@ def main(out: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[2] / "docs" / "dataset_channels.png")
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[2] / "docs" / "images" / "dataset_channels.png")
