@@ -63,6 +63,12 @@ def _output_kind(out: str | os.PathLike[str]) -> str:
     text = os.fspath(out)
     if not text:
         raise ClothsimError("-o: output path is empty")
+    from .store import is_url
+
+    if is_url(text):
+        if text.rstrip("/").lower().endswith(".png"):
+            raise ClothsimError(f"{text}: a contact sheet is a local .png; a URL is for a dataset")
+        return "dataset"
     check_name(text)
     p = Path(text)
     if p.suffix.lower() == ".png" and not text.endswith(("/", os.sep)):
@@ -81,7 +87,7 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
           scheduler: str | None = None, video: bool = False, views: int = 0,
           channels: str | list[str] | tuple[str, ...] | None = None,
           split: str | tuple[float, float, float] | None = None, split_seed: int = 0,
-          progress: bool = False, report: bool = False) -> list[dict[str, Any]]:
+          write_in_workers: bool = False, progress: bool = False, report: bool = False) -> list[dict[str, Any]]:
     """Run ``scene`` once per parameter set and write ``out``; return one record per run.
 
     ``grid_or_samples`` maps dotted field paths to values: ``{"cloth.ks": [10, 5000],
@@ -102,6 +108,10 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
     ``runs/<id>/``: the ``channels`` asked for (default all of ``rgb, depth, normal, mask, flow``)
     and ``cameras.json``. ``split`` (train, valid, test fractions, default 0.8, 0.1, 0.1) and
     ``split_seed`` assign each run to a split in ``meta.json`` (see docs/datasets.md).
+
+    ``write_in_workers`` has the workers write each run's files straight into ``out`` (a folder
+    every worker reaches); only the manifest lines travel back. ``out`` may also be an fsspec
+    URL (``memory://``, ``s3://bucket/prefix``), which the workers always write directly.
 
     A dataset folder is locked while the sweep runs: another sweep into it (or this one started
     again) raises :class:`~clothsim.ClothsimError` naming the holder, and writes nothing.
@@ -185,9 +195,15 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
             listed = settings[run.id].views
             if listed is not None and len(listed) < views:
                 raise ClothsimError(f"--views {views}: render.views lists only {len(listed)} cameras ({run.id})")
+    from .store import is_url, remote_dataset
+
+    remote = kind == "dataset" and is_url(os.fspath(out))
+    if write_in_workers and kind != "dataset":
+        raise ClothsimError("--write-in-workers: needs a dataset folder as OUT, not a .png")
+    direct = bool(write_in_workers) or remote
     data: ds.Dataset | None = None
     if kind == "dataset":
-        data = ds.Dataset(out, definition)
+        data = remote_dataset(os.fspath(out), definition) if remote else ds.Dataset(out, definition)
         data.open()  # locked from here: close() below, however the sweep ends
     else:
         check_destination(out, label=os.fspath(out))
@@ -203,8 +219,10 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
         data.splits = {r.id: M.split_of(r.id, r.params, sampled, fractions, split_seed) for r in runs}
     try:
         records, images, lost = _run_all(runs, scenes, settings, data, out, kind, frame_list, last, every, seed,
-                                 cell_size, video, workers, scheduler, progress, views, tuple(channel_list))
-        if data is not None and data.out.joinpath(ds.DEFINITION).is_file():
+                                 cell_size, video, workers, scheduler, progress, views, tuple(channel_list),
+                                 os.fspath(data.out.resolve()) if direct and not remote and data is not None
+                                 else (os.fspath(out) if remote else None))
+        if data is not None and data.has_definition():
             data.write_meta(data.meta)  # also when a resume had nothing left to run
     finally:
         if data is not None:
@@ -226,7 +244,8 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
 def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, Any], data: ds.Dataset | None,
              out: Any, kind: str, frame_list: list[int], last: int, every: int, seed: int | None,
              cell_size: tuple[int, int], video: bool, workers: int | None, scheduler: str | None,
-             progress: bool, views: int = 0, channels: tuple[str, ...] = ()) -> tuple[dict[str, dict[str, Any]], dict[tuple[str, int], np.ndarray | None], int]:
+             progress: bool, views: int = 0, channels: tuple[str, ...] = (),
+             write_to: str | None = None) -> tuple[dict[str, dict[str, Any]], dict[tuple[str, int], np.ndarray | None], int]:
     """Run every run not finished yet; return the records by id, a contact sheet's cells, and the
     number of runs lost with a worker."""
     finished: dict[str, dict[str, Any]] = {}
@@ -240,7 +259,7 @@ def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, An
     tasks = [Task(id=r.id, scene=scenes[r.id], frames=last, every=every, positions=kind == "dataset",
                   cells=tuple(frame_list) if kind == "sheet" else (), video=bool(video),
                   settings=settings.get(r.id), size=cell_size, samples=samples_msaa.get(r.id, 4), threads=1,
-                  views=views, channels=channels, view_seed=(seed or 0, r.index, 1))
+                  views=views, channels=channels, view_seed=(seed or 0, r.index, 1), write_to=write_to)
              for r in runs if r.id not in finished]
     by_id = {r.id: r for r in runs}
     records: dict[str, dict[str, Any]] = {rid: {**rec, "skipped": True} for rid, rec in finished.items()}
@@ -253,31 +272,16 @@ def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, An
                   "error": result["error"], "path": None, "frames": last, "seconds": round(result["seconds"], 3)}
         if data is not None:
             if result["status"] == "done":
-                sc = scenes[run.id]
-                from ..cloth import cloth_triangles, cloth_uvs  # not the renderer's module: no Numba here
-
-                faces = cloth_triangles(result["nw"], result["nh"]).astype(np.int32).reshape(-1, 3)
-                uv = np.asarray(cloth_uvs(result["nw"], result["nh"]), dtype=np.float32)
-                pinned = np.asarray(result["pinned"], dtype=bool)
-                arrays = {
-                    "positions": result["positions"],
-                    "faces": faces,
-                    "uv": uv,
-                    "pinned": pinned,
-                    "scene": np.array(json.dumps(P.scene_json(sc))),
-                    "frames": np.array(sample_frames(last, every), dtype=np.int64),
-                    # MeshGraphNets' names (world_pos is positions: meta.json says so)
-                    "mesh_pos": uv * np.array([sc.cloth.width, sc.cloth.height], dtype=np.float32),
-                    "node_type": np.where(pinned, M.NODE_HANDLE, M.NODE_NORMAL).astype(np.int32),
-                    "cells": faces,
-                }
-                fps = sc.simulation.frames_per_sec / every
-                record["path"] = data.write_run(run.id, arrays, result["video"], fps)
-                if result.get("views") is not None:
-                    from ..render.channels import collider_ids
-
-                    result["views"]["cameras"] = [{**c, "mask_ids": collider_ids(sc)} for c in result["views"]["cameras"]]
-                    data.write_views(run.id, result["views"], sample_frames(last, every))
+                if result.get("written"):  # the worker wrote the files into OUT itself
+                    record["path"] = result["written"]
+                else:
+                    sc = scenes[run.id]
+                    arrays = ds.run_arrays(result["positions"], result["nw"], result["nh"], result["pinned"], sc,
+                                           sample_frames(last, every), P.scene_json(sc))
+                    fps = sc.simulation.frames_per_sec / every
+                    record["path"] = data.write_run(run.id, arrays, result["video"], fps)
+                    if result.get("views") is not None:
+                        data.write_views(run.id, result["views"], sample_frames(last, every))
             record["split"] = data.splits[run.id]
             if views:
                 record["render_seconds"] = round(result.get("render_seconds", 0.0), 3)
@@ -302,6 +306,8 @@ def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, An
                     task = futures.pop(future)  # drop the result with it once written: memory stays flat
                     try:
                         result = future.result()
+                        if result.get("write_failed"):
+                            raise _WriteFailed(result["error"])
                     except Exception as exc:  # noqa: BLE001 - the run itself never raises (runner.run)
                         # A local worker that died (BrokenProcessPool), a Dask worker lost with the
                         # run (KilledWorker), a transfer that failed: the run has no result, which
@@ -319,8 +325,14 @@ def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, An
     return records, images, lost
 
 
+class _WriteFailed(Exception):
+    """A worker ran the run but could not write its files into OUT."""
+
+
 def _lost_reason(exc: BaseException) -> str:
-    if isinstance(exc, concurrent.futures.process.BrokenProcessPool):
+    if isinstance(exc, _WriteFailed):
+        why = str(exc)
+    elif isinstance(exc, concurrent.futures.process.BrokenProcessPool):
         why = "the worker process running it died"
     else:
         why = " ".join(f"{type(exc).__name__}: {exc}".split())

@@ -45,6 +45,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "drawn around the cloth from the run's seed) into runs/<id>/")
     p.add_argument("--channels", metavar="LIST",
                    help="with --views: comma-separated channels of rgb,depth,normal,mask,flow (default all)")
+    p.add_argument("--write-in-workers", action="store_true",
+                   help="dataset: each worker writes its runs' files straight into OUT (a folder every worker "
+                        "reaches); an fsspec URL as OUT (memory://, s3://...) is always written so")
     p.add_argument("--split", metavar="TRAIN,VALID,TEST",
                    help="dataset: fractions of the train/valid/test split in meta.json (default 0.8,0.1,0.1)")
     p.add_argument("--split-seed", type=int, default=0, metavar="S", help="dataset: seed of the split (default 0)")
@@ -77,5 +80,6 @@ def run_sweep(args: argparse.Namespace) -> int:
     records = sweep(args.scene, space, args.output, frames=frames, every=args.every, samples=args.samples,
                     seed=args.seed, shader=args.shader, size=args.size, workers=args.workers,
                     scheduler=args.scheduler, video=args.video, views=args.views, channels=args.channels,
-                    split=args.split, split_seed=args.split_seed, progress=True, report=True)
+                    split=args.split, split_seed=args.split_seed, write_in_workers=args.write_in_workers,
+                    progress=True, report=True)
     return 1 if any(r["status"] == "failed" for r in records) else 0

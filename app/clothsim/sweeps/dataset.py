@@ -202,9 +202,8 @@ class Dataset:
         return out
 
     def _complete(self, run_id: str, record: dict[str, Any], want: dict[str, Any]) -> bool:
-        path = self.out / RUNS / f"{run_id}.npz"
         try:
-            with np.load(path, allow_pickle=False) as data:
+            with self._npz(f"{RUNS}/{run_id}.npz") as data:
                 if set(NPZ_KEYS) - set(data.files):
                     return False
                 arrays = {k: data[k] for k in NPZ_KEYS}  # reading checks every member's CRC
@@ -213,37 +212,54 @@ class Dataset:
         positions = arrays["positions"]
         if positions.dtype != np.float32 or positions.shape[0] != want["samples"] or positions.shape[2:] != (3,):
             return False
-        if self.definition.get("video"):
-            video = self.out / RUNS / f"{run_id}.mp4"
-            if not video.is_file() or video.stat().st_size == 0:
-                return False
+        if self.definition.get("video") and self._size(f"{RUNS}/{run_id}.mp4") <= 0:
+            return False
         if self.definition.get("views"):
             return self._views_complete(run_id, want["samples"])
         return True
 
     def _views_complete(self, run_id: str, samples: int) -> bool:
         """A run's views folder holds its cameras, every PNG and whole arrays."""
-        folder = self.out / RUNS / run_id
+        folder = f"{RUNS}/{run_id}"
         views = int(self.definition["views"])
         channels = self.definition["channels"]
         try:
-            cameras = json.loads((folder / VIEW_CAMERAS).read_text(encoding="utf-8"))
+            cameras = json.loads(self._bytes(f"{folder}/{VIEW_CAMERAS}").decode("utf-8"))
             if not isinstance(cameras, list) or len(cameras) != views:
                 return False
             if "rgb" in channels:
-                pngs = [n for n in os.listdir(folder) if n.startswith("rgb_") and VIEW_FILE.fullmatch(n)]
-                if len(pngs) != views * samples or any((folder / n).stat().st_size == 0 for n in pngs):
+                pngs = [n for n in self._names(folder) if n.startswith("rgb_") and VIEW_FILE.fullmatch(n)]
+                if len(pngs) != views * samples or any(self._size(f"{folder}/{n}") <= 0 for n in pngs):
                     return False
             arrays = [c for c in channels if c != "rgb"]
             if arrays:
-                with np.load(folder / VIEW_ARRAYS, allow_pickle=False) as data:
+                with self._npz(f"{folder}/{VIEW_ARRAYS}") as data:
                     for name in arrays:
                         a = data[name]  # reading checks the member's CRC
                         if a.shape[0] != views or a.shape[1] != samples - (1 if name == "flow" else 0):
                             return False
-        except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile):
+        except (OSError, ValueError, EOFError, KeyError, UnicodeDecodeError, zipfile.BadZipFile):
             return False
         return True
+
+    # -- reading files (a remote dataset reads through fsspec instead) --------------------------
+    def _npz(self, rel: str) -> Any:
+        return np.load(self.out / rel, allow_pickle=False)
+
+    def _bytes(self, rel: str) -> bytes:
+        return (self.out / rel).read_bytes()
+
+    def _names(self, rel: str) -> list[str]:
+        return os.listdir(self.out / rel)
+
+    def _size(self, rel: str) -> int:
+        """The file's size, or -1 if it is not a file."""
+        path = self.out / rel
+        return path.stat().st_size if path.is_file() else -1
+
+    def has_definition(self) -> bool:
+        """Whether ``sweep.json`` has been written (the dataset has started)."""
+        return (self.out / DEFINITION).is_file()
 
     # -- writing -------------------------------------------------------------------------------
     def write_meta(self, meta: dict[str, Any]) -> None:
@@ -306,6 +322,29 @@ class Dataset:
                 fh.write(line.encode("utf-8"))
                 fh.flush()
                 os.fsync(fh.fileno())
+
+
+def run_arrays(positions: np.ndarray, nw: int, nh: int, pinned: np.ndarray, scene: Any, frames: list[int],
+               scene_json: dict[str, Any]) -> dict[str, np.ndarray]:
+    """The members of a run file (``runs/<id>.npz``), MeshGraphNets' fields among them."""
+    from ..cloth import cloth_triangles, cloth_uvs  # not the renderer's module: no Numba here
+    from .meta import NODE_HANDLE, NODE_NORMAL
+
+    faces = cloth_triangles(nw, nh).astype(np.int32).reshape(-1, 3)
+    uv = np.asarray(cloth_uvs(nw, nh), dtype=np.float32)
+    pinned = np.asarray(pinned, dtype=bool)
+    return {
+        "positions": positions,
+        "faces": faces,
+        "uv": uv,
+        "pinned": pinned,
+        "scene": np.array(json.dumps(scene_json)),
+        "frames": np.array(frames, dtype=np.int64),
+        # MeshGraphNets' names (world_pos is positions: meta.json says so)
+        "mesh_pos": uv * np.array([scene.cloth.width, scene.cloth.height], dtype=np.float32),
+        "node_type": np.where(pinned, NODE_HANDLE, NODE_NORMAL).astype(np.int32),
+        "cells": faces,
+    }
 
 
 def _difference(theirs: dict[str, Any], ours: dict[str, Any]) -> str:

@@ -45,6 +45,7 @@ class Task:
     views: int = 0  # cameras of a dataset's views (0: none)
     channels: tuple[str, ...] = ()  # of render.channels.CHANNELS
     view_seed: tuple[int, ...] = (0,)  # drawn cameras come from numpy.random.default_rng(view_seed)
+    write_to: str | None = None  # a dataset's OUT (folder or fsspec URL): the worker writes the run's files there
     extra: dict[str, Any] = field(default_factory=dict)
 
 
@@ -93,6 +94,14 @@ def run(task: Task) -> dict[str, Any]:
         result.update(status="failed", error=_one_line(exc), positions=None, cells={}, video=None, views=None)
     except MemoryError as exc:
         result.update(status="failed", error=_one_line(exc), positions=None, cells={}, video=None, views=None)
+    if task.write_to is not None and result["status"] == "done":
+        try:
+            _write(task, result)
+        except Exception as exc:  # noqa: BLE001 - a full disk, a lost connection: not the run's fault
+            # Not a property of the run's parameters: the sweep reports it and does not record
+            # it, so the same command writes the run again.
+            result.update(status="failed", error=f"cannot write its files: {_one_line(exc)}", positions=None,
+                          views=None, video=None, write_failed=True)
     result["seconds"] = time.perf_counter() - start
     return result
 
@@ -164,6 +173,22 @@ def _simulate(task: Task, result: dict[str, Any]) -> None:
         result["render_seconds"] += time.perf_counter() - t0
 
 
+def _write(task: Task, result: dict[str, Any]) -> None:
+    """Write the run's files into ``task.write_to`` and drop the arrays from the result: only
+    the manifest line's facts travel back."""
+    from .dataset import run_arrays
+    from .params import scene_json
+    from .store import encode_run, write_files
+
+    frames = sample_frames(task.frames, task.every)
+    arrays = run_arrays(result["positions"], result["nw"], result["nh"], result["pinned"], task.scene, frames,
+                        scene_json(task.scene))
+    files = encode_run(task.id, arrays, result["views"], frames, result["video"],
+                       task.scene.simulation.frames_per_sec / task.every)
+    write_files(task.write_to, files)
+    result.update(positions=None, views=None, video=None, pinned=None, written=f"runs/{task.id}.npz")
+
+
 @dataclass
 class _Frame:
     """A sampled frame as the renderer reads a simulation (positions as the dataset stores them)."""
@@ -202,7 +227,10 @@ def draw_views(task: Task, sim: Any, samples: np.ndarray, moments: list[tuple[fl
     w, h = task.size
     n_v, n_t = len(cams), samples.shape[0]
     want = set(task.channels)
-    out: dict[str, Any] = {"cameras": [c.as_dict() for c in cams]}
+    from ..render.channels import collider_ids
+
+    ids = collider_ids(task.scene)
+    out: dict[str, Any] = {"cameras": [{**c.as_dict(), "mask_ids": ids} for c in cams]}
     if "rgb" in want:
         out["rgb"] = np.empty((n_v, n_t, h, w, 3), dtype=np.uint8)
     data = want & {"depth", "normal", "mask", "flow"}
