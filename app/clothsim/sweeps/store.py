@@ -84,8 +84,10 @@ def encode_views(views: dict[str, Any], frames: list[int]) -> list[tuple[str, by
                 out.append((f"rgb_v{v}_{frame:05d}.png", buf.getvalue()))
     arrays = {k: views[k] for k in ("depth", "normal", "mask", "flow") if k in views}
     if arrays:
+        from .dataset import save_npz
+
         buf = io.BytesIO()
-        np.savez_compressed(buf, **arrays)
+        save_npz(buf, arrays)
         out.append(("channels.npz", buf.getvalue()))
     return out
 
