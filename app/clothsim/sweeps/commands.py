@@ -32,7 +32,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="frames to simulate (default 90); for a .png a comma-separated list draws one cell per frame")
     p.add_argument("--every", type=int, default=1, metavar="K", help="dataset: keep positions every K frames (default 1)")
     p.add_argument("--shader", help="look of the images (default: the scene's, else phong)")
-    p.add_argument("--size", metavar="WxH", help="image size of a cell or video frame (default 256x256)")
+    p.add_argument("--size", metavar="WxH", help="image size of a cell, video frame or view (default 256x256)")
     p.add_argument("--samples", type=int, metavar="N", help="draw N runs at random instead of the grid (needs --seed)")
     p.add_argument("--seed", type=int, metavar="S", help="seed of --samples: run i's parameters depend on S and i only")
     where = p.add_mutually_exclusive_group()
