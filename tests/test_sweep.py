@@ -177,7 +177,7 @@ def test_dataset_matches_simulate_bit_for_bit(tmp_path: Path, scene_file: Path) 
     records = [json.loads(line) for line in (out / "manifest.jsonl").read_text().splitlines()]
     assert sorted(rec["id"] for rec in records) == [f"run_{i:05d}" for i in range(4)]
     for rec in records:
-        assert set(rec) == {"id", "params", "seed", "status", "error", "path", "frames", "seconds"}
+        assert set(rec) == {"id", "params", "seed", "status", "error", "path", "frames", "seconds", "split"}
         assert rec["status"] == "done" and rec["error"] is None and rec["frames"] == 5
         with np.load(out / rec["path"]) as data:
             pos = data["positions"]

@@ -43,6 +43,12 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", default="1,2", metavar="LIST", help="worker counts to time (default 1,2)")
     p.add_argument("--repeat", type=int, default=1, metavar="R",
                    help="run the variants R times in turns and print medians (default 1)")
+    p.add_argument("--views", type=int, default=0, metavar="V",
+                   help="the dataset case: every run also draws V views x all channels (rgb, depth, normal, mask, "
+                        "flow) of every --every-th frame at --size; timed with the parent writing and with "
+                        "--write-in-workers, with the renderer's share of a run")
+    p.add_argument("--size", default="256x256", metavar="WxH", help="with --views: image size (default 256x256)")
+    p.add_argument("--every", type=int, default=10, metavar="K", help="with --views: sample every K frames (default 10)")
     p.set_defaults(func=run)
 
 
@@ -96,6 +102,61 @@ def _sweep_command(scene: str, values: list[float], frames: int, workers: int, o
             "--frames", str(frames), "--workers", str(workers), "-o", str(out)]
 
 
+def _views_command(scene: str, values: list[float], frames: int, workers: int, out: Path, views: int, size: str,
+                   every: int, direct: bool) -> list[str]:
+    return [*_sweep_command(scene, values, frames, workers, out), "--views", str(views), "--size", size,
+            "--every", str(every), *(["--write-in-workers"] if direct else [])]
+
+
+def _render_share(folder: Path) -> tuple[float, float]:
+    """Seconds of drawing and of whole runs, summed over a dataset's manifest."""
+    import json
+
+    drawn = total = 0.0
+    for line in (folder / "manifest.jsonl").read_text(encoding="utf-8").splitlines():
+        record = json.loads(line)
+        drawn += float(record.get("render_seconds") or 0.0)
+        total += float(record.get("seconds") or 0.0)
+    return drawn, total
+
+
+def run_views(args: argparse.Namespace, runs: int, frames: int, repeat: int, counts: list[int]) -> int:
+    """The dataset case: runs per minute with views and every channel, 1 vs 2 workers, and
+    where a run's time goes."""
+    views = check(integer(ge=1, le=64), args.views, "--views")
+    every = check(integer(ge=1), args.every, "--every")
+    values = [float(v) for v in np.linspace(4000.0, 6000.0, runs)]
+    variants = [(n, direct) for direct in (False, True) for n in counts]
+    names = {(n, d): f"sweep --workers {n}{' --write-in-workers' if d else ''}" for n, d in variants}
+    times: dict[tuple[int, bool], list[float]] = {v: [] for v in variants}
+    shares: dict[tuple[int, bool], list[tuple[float, float]]] = {v: [] for v in variants}
+    with tempfile.TemporaryDirectory(prefix="clothsim-bench-sweep.") as tmp:
+        folder = Path(tmp)
+        # Compile (or load) the kernels and start the renderer once, so no variant pays a cold compile.
+        _timed(_views_command(args.scene, values[:1], 2, 1, folder / "warm", views, args.size, every, False))
+        for r in range(repeat):
+            for n, direct in variants:
+                out = folder / f"views_{n}_{int(direct)}_{r}"
+                times[(n, direct)].append(_timed(_views_command(args.scene, values, frames, n, out, views, args.size,
+                                                                every, direct)))
+                shares[(n, direct)].append(_render_share(out))
+    samples = len(range(0, frames + 1, every)) + (0 if frames % every == 0 else 1)
+    print(f"bench sweep: {args.scene}, {runs} runs x {frames} frames, {views} views x rgb,depth,normal,mask,flow "
+          f"at {args.size} of {samples} sampled frames per run, median of {repeat}")
+    print(f"{'variant':<44}{'seconds':>9}{'runs/min':>10}{'vs 1 worker':>13}{'renderer share':>16}")
+    for direct in (False, True):
+        one = statistics.median(times[(counts[0], direct)]) if counts[0] == 1 else None
+        for n in counts:
+            seconds = statistics.median(times[(n, direct)])
+            drawn = sum(d for d, _ in shares[(n, direct)])
+            total = sum(t for _, t in shares[(n, direct)])
+            vs_one = f"{one / seconds:>12.2f}x" if one is not None else " " * 13
+            print(f"{names[(n, direct)]:<44}{seconds:>9.2f}{60.0 * runs / seconds:>10.1f}{vs_one}"
+                  f"{100.0 * drawn / max(total, 1e-9):>15.0f}%")
+    print("renderer share: the workers' drawing time (views' RGB and channels) over their whole runs' time")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Print the table."""
     import numba
@@ -109,6 +170,8 @@ def run(args: argparse.Namespace) -> int:
         counts = []
     if not counts or min(counts) < 1:
         raise ClothsimError(f"--workers: expected a comma-separated list of counts >= 1, got {args.workers!r}")
+    if args.views:
+        return run_views(args, runs, frames, repeat, counts)
     values = [float(v) for v in np.linspace(4000.0, 6000.0, runs)]
     names = ["plain API loop (script), 1 Numba thread"] + [f"clothsim sweep --workers {n}" for n in counts]
     times: dict[str, list[float]] = {name: [] for name in names}

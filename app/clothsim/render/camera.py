@@ -12,6 +12,9 @@ import numpy as np
 DEFAULT_AZIMUTH_DEG = 25.0
 DEFAULT_ELEVATION_DEG = 35.0
 VIEW_DISTANCE_FACTOR = 2.0 * 0.9  # distance = 2 * 0.9 * max(width, height), as in the course
+# Images are drawn upside down (clip-space y negated) so that GL's bottom-up rows read back as a
+# top-down image with no copy.
+FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])
 
 
 @dataclass(frozen=True)

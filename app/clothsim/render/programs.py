@@ -21,6 +21,8 @@ LOOKS: dict[str, tuple[str, str]] = {
     "displacement": ("displacement.vert", "bump.frag"),
     "mirror": ("mesh.vert", "mirror.frag"),
     "custom": ("displacement.vert", "custom.frag"),
+    # Not a look: a dataset's depth, flow, mask and normals, drawn into float targets (channels.py).
+    "channels": ("channels.vert", "channels.frag"),
 }
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
@@ -72,3 +74,10 @@ def set_uniform(prog: Any, name: str, value: Any) -> None:
             u.write(value)
         else:
             u.value = value
+
+
+def set_matrix(prog: Any, name: str, m: Any) -> None:
+    """Set a mat4 uniform from a row-major NumPy matrix (GL reads uniforms column by column)."""
+    import numpy as np
+
+    set_uniform(prog, name, np.ascontiguousarray(np.asarray(m).T, dtype=np.float32).tobytes())

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 import numpy as np
 
@@ -21,11 +21,15 @@ from ..colliders import KINDS
 from ..scene import Scene, available_memory
 from ..sim.passes.colliders.moving import posed, shift
 from . import mesh, textures
-from .camera import Camera, default_position, default_target
+from .camera import FLIP_Y, Camera, default_position, default_target
 from .context import create_context
-from .programs import Programs, set_uniform
+from .programs import Programs, set_matrix, set_uniform
 from .settings import (SHADERS, USES_COLOR_TEXTURE, USES_CUBEMAP, USES_HEIGHT_MAP, USES_TANGENTS,
                        RenderSettings, srgb_to_linear)
+
+if TYPE_CHECKING:
+    from .channels import Channels
+    from .views import ViewCamera
 
 GL_SRGB8_ALPHA8 = 0x8C43
 # Texture units, fixed per sampler so that binding order never matters.
@@ -87,6 +91,7 @@ class _ClothBuffers:
     uv_vbo: Any
     tri_ibo: Any
     tri_count: int
+    next_vbo: Any = None  # the data channels' next positions (made on first use)
 
 
 class Renderer:
@@ -131,14 +136,16 @@ class Renderer:
         self._vaos: dict[tuple[Any, ...], Any] = {}
         self._textures: dict[tuple[Any, ...], Any] = {}
         self._settings_for: tuple[Scene | None, RenderSettings | None] = (None, None)
+        self._channels: Any = None  # the data pass's float targets (channels.py), made on first use
         self.timings: dict[str, float] = dict.fromkeys(STAGES, 0.0)
 
     # -- public --------------------------------------------------------------------------------
     def render(self, simulation: ClothState, shader: str | None = None,
-               settings: RenderSettings | None = None) -> np.ndarray:
+               settings: RenderSettings | None = None, camera: Camera | None = None) -> np.ndarray:
         """Draw ``simulation``'s current state; returns a new (height, width, 3) uint8 array.
 
-        ``settings`` defaults to the scene's ``render`` object; ``shader`` overrides its look.
+        ``settings`` defaults to the scene's ``render`` object; ``shader`` overrides its look;
+        ``camera`` overrides the settings' camera (a dataset's fixed views).
         The image size is the renderer's, whatever ``settings.size`` says.
         """
         settings = settings or self.settings_for(simulation.scene)
@@ -156,7 +163,7 @@ class Renderer:
             t1 = time.perf_counter()
             buffers.vbo.write(buffers.vertices)
             t2 = time.perf_counter()
-            self._draw(simulation, look, settings, buffers)
+            self._draw(simulation, look, settings, buffers, camera)
             if self.profile:
                 self.ctx.finish()
             t3 = time.perf_counter()
@@ -164,6 +171,14 @@ class Renderer:
             t4 = time.perf_counter()
         self.timings = {"mesh": t1 - t0, "upload": t2 - t1, "draw": t3 - t2, "readback": t4 - t3}
         return image
+
+    def render_channels(self, simulation: ClothState, view: ViewCamera,
+                        next_positions: np.ndarray | None = None) -> Channels:
+        """Depth, optical flow to ``next_positions``, mask and normals of ``simulation``'s
+        current state seen from ``view`` (of this renderer's size); see :mod:`.channels`."""
+        from .channels import draw_channels
+
+        return draw_channels(self, simulation, view, next_positions)
 
     def settings_for(self, scene: Scene) -> RenderSettings:
         """The scene's render settings (validated once per scene object)."""
@@ -203,6 +218,9 @@ class Renderer:
         """Free every GL object and the context."""
         with self.ctx:
             self.programs.release()
+            if self._channels is not None:
+                self._channels.release()
+                self._channels = None
             self._release_framebuffers()
         self.ctx.release()
 
@@ -267,8 +285,9 @@ class Renderer:
         if b is not None and (b.nw, b.nh) == (nw, nh):
             return b
         if b is not None:
-            for obj in (b.vbo, b.uv_vbo, b.tri_ibo):
-                obj.release()
+            for obj in (b.vbo, b.uv_vbo, b.tri_ibo, b.next_vbo):
+                if obj is not None:
+                    obj.release()
             self._drop_vaos("cloth")
         vertices = np.zeros((nw * nh, mesh.CLOTH_FLOATS), dtype=np.float32)
         tris = mesh.cloth_triangles(nw, nh)
@@ -280,6 +299,18 @@ class Renderer:
             tri_count=int(tris.size),
         )
         return self._cloth
+
+    def _next_buffer(self, buffers: _ClothBuffers) -> Any:
+        if buffers.next_vbo is None:
+            buffers.next_vbo = self.ctx.buffer(reserve=buffers.nw * buffers.nh * 12, dynamic=True)
+        return buffers.next_vbo
+
+    def _channel_targets(self) -> Any:
+        if self._channels is None:
+            from .channels import _Targets
+
+            self._channels = _Targets(self.ctx, self.width, self.height)
+        return self._channels
 
     def _spring_buffer(self, springs: Springs) -> None:
         if self._springs is springs:
@@ -325,7 +356,7 @@ class Renderer:
         vao = self._vao(look, "shape", key, lambda p: self.ctx.vertex_array(
             p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
             ibo, index_element_size=4, skip_errors=True))
-        _set_matrix(prog, "u_model", _translation(offset))
+        set_matrix(prog, "u_model", _translation(offset))
         vao.render(moderngl.TRIANGLES)
 
     def _drop_vaos(self, geometry: str) -> None:
@@ -373,7 +404,8 @@ class Renderer:
         return self._textures[key]
 
     # -- drawing -----------------------------------------------------------------------------
-    def _draw(self, sim: ClothState, look: str, settings: RenderSettings, buffers: _ClothBuffers) -> None:
+    def _draw(self, sim: ClothState, look: str, settings: RenderSettings, buffers: _ClothBuffers,
+              camera: Camera | None = None) -> None:
         import moderngl
 
         ctx = self.ctx
@@ -385,8 +417,7 @@ class Renderer:
         bg = settings.background
         ctx.clear(bg[0], bg[1], bg[2], 1.0, depth=1.0)  # the framebuffer holds sRGB values
 
-        scene = sim.scene
-        cam = self.camera(sim, settings)
+        cam = camera if camera is not None else self.camera(sim, settings)
         prog = self.programs.get(look)
         self._set_common_uniforms(prog, look, cam, settings)
         ident = np.eye(4)
@@ -398,7 +429,7 @@ class Renderer:
                 p, [(buffers.vbo, "3f 3f 3f", "in_position", "in_normal", "in_tangent"),
                     (buffers.uv_vbo, "2f", "in_uv")],
                 buffers.tri_ibo, index_element_size=4, skip_errors=True))
-            _set_matrix(prog, "u_model", ident)
+            set_matrix(prog, "u_model", ident)
             vao.render(moderngl.TRIANGLES)
 
         if look == "wireframe":
@@ -406,18 +437,31 @@ class Renderer:
             ctx.wireframe = True
             dim = tuple(0.45 * c for c in srgb_to_linear(settings.color))
             set_uniform(prog, "u_color", (*dim, 1.0))
+        self._draw_colliders(prog, look, sim, settings)
+        ctx.wireframe = False
+        ctx.copy_framebuffer(self._fbo, self._ms_fbo)  # resolves the multisampled image
+
+    def _draw_colliders(self, prog: Any, look: str, sim: ClothState, settings: RenderSettings,
+                        mark: Callable[[int], None] | None = None) -> None:
+        """Every collider, kind by kind in the registry's order (:data:`clothsim.colliders.KINDS`).
+        ``mark(k)`` is called before the k-th (from 0) is drawn (the data pass's mask ids)."""
+        import moderngl
+
+        scene = sim.scene
         # Moving colliders are drawn where they are at the simulation's time: the shape built at
         # its scene pose, moved by the model matrix. Kind by kind, in the registry's order.
         now = float(getattr(sim, "time", 0.0))
         draw = {"sphere": self._draw_sphere, "plane": self._draw_plane, "capsule": self._draw_capsule,
                 "box": self._draw_box, "mesh": self._draw_mesh}
+        drawn = 0
         for kind in KINDS:
             for spec in getattr(scene, kind.attr):
+                if mark is not None:
+                    mark(drawn)
+                drawn += 1
                 draw[kind.key](prog, look, settings, spec, now)
-        ctx.disable(moderngl.CULL_FACE)
-        ctx.polygon_offset = (0.0, 0.0)
-        ctx.wireframe = False
-        ctx.copy_framebuffer(self._fbo, self._ms_fbo)  # resolves the multisampled image
+        self.ctx.disable(moderngl.CULL_FACE)
+        self.ctx.polygon_offset = (0.0, 0.0)
 
     def _mesh_collider(self, spec: Any) -> tuple[Any, Any]:
         entry = self._meshes.get(id(spec))
@@ -460,7 +504,7 @@ class Renderer:
             ibo, index_element_size=4, skip_errors=True))
         model = np.diag([*(3 * [sphere.radius * SPHERE_DRAW_SCALE]), 1.0])
         model[:3, 3] = posed(sphere, now).origin
-        _set_matrix(prog, "u_model", model)
+        set_matrix(prog, "u_model", model)
         vao.render(moderngl.TRIANGLES)
 
     def _draw_capsule(self, prog: Any, look: str, settings: RenderSettings, capsule: Any, now: float) -> None:
@@ -478,7 +522,7 @@ class Renderer:
         vao = self._vao(look, "plane", (plane.point, plane.normal), lambda p: self.ctx.vertex_array(
             p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
             ibo, index_element_size=4, skip_errors=True))
-        _set_matrix(prog, "u_model", _translation(shift(plane, now)))
+        set_matrix(prog, "u_model", _translation(shift(plane, now)))
         vao.render(moderngl.TRIANGLES)
 
     def _draw_box(self, prog: Any, look: str, settings: RenderSettings, box: Any, now: float) -> None:
@@ -499,7 +543,7 @@ class Renderer:
             ibo, index_element_size=4, skip_errors=True))
         model = np.eye(4)
         model[:3, 3] = spec.track().at(now)
-        _set_matrix(prog, "u_model", model)
+        set_matrix(prog, "u_model", model)
         vao.render(moderngl.TRIANGLES)
 
     def _draw_wireframe(self, prog: Any, sim: ClothState, settings: RenderSettings,
@@ -509,7 +553,7 @@ class Renderer:
         self._spring_buffer(sim.live_springs)
         vao = self._vao("wireframe", "springs", None, lambda p: self.ctx.vertex_array(
             p, [(buffers.vbo, "3f 24x", "in_position")], self._spring_ibo, index_element_size=4))
-        _set_matrix(prog, "u_model", np.eye(4))
+        set_matrix(prog, "u_model", np.eye(4))
         if settings.color_by_family:
             for family, first, count in self._spring_ranges:
                 set_uniform(prog, "u_color", (*srgb_to_linear(FAMILY_COLORS[family]), 1.0))
@@ -521,7 +565,7 @@ class Renderer:
     def _set_common_uniforms(self, prog: Any, look: str, cam: Camera, settings: RenderSettings) -> None:
         # Rendered upside down (clip-space y negated, winding flipped to match in _draw), so
         # the framebuffer's bottom-up rows read back as a top-down image with no copy.
-        _set_matrix(prog, "u_view_projection", _FLIP_Y @ cam.view_projection(self.width / self.height))
+        set_matrix(prog, "u_view_projection", FLIP_Y @ cam.view_projection(self.width / self.height))
         set_uniform(prog, "u_cam_pos", tuple(float(c) for c in cam.position))
         set_uniform(prog, "u_light_pos", settings.light_position)
         set_uniform(prog, "u_light_intensity", settings.light_intensity)
@@ -554,15 +598,7 @@ class Renderer:
         return image
 
 
-_FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])
-
-
 def _translation(offset: np.ndarray) -> np.ndarray:
     m = np.eye(4)
     m[:3, 3] = offset
     return m
-
-
-def _set_matrix(prog: Any, name: str, m: np.ndarray) -> None:
-    # NumPy matrices are row-major; GL reads uniforms column by column.
-    set_uniform(prog, name, np.ascontiguousarray(m.T, dtype=np.float32).tobytes())

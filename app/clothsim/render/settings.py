@@ -12,7 +12,11 @@ The ``render`` object (all keys optional)::
      "sphere_resolution": [40, 40],
      "textures": {"color": "cloth.png", "height": "bumps.png",
                   "cubemap": ["px.png", "nx.png", "py.png", "ny.png", "pz.png", "nz.png"]},
-     "wireframe": {"color_by_family": false}}
+     "wireframe": {"color_by_family": false},
+     "views": [{"position": [x, y, z], "target": [x, y, z], "fov": 35}, ...]}
+
+``views`` are the fixed cameras of a sweep dataset's ``--views`` (each ``fov`` defaults to the
+camera's); without them the dataset's cameras are drawn around the cloth from the run's seed.
 
 Colours are sRGB in [0, 1] (or ``#rrggbb``), as a colour picker shows them; the renderer
 linearises them before lighting. Texture paths are relative to the scene file.
@@ -72,6 +76,7 @@ class RenderSettings:
     height_texture: str | None = None
     cubemap: tuple[str, ...] | None = None  # six faces: +x, -x, +y, -y, +z, -z
     color_by_family: bool = False
+    views: tuple[tuple[Vec3, Vec3, float | None], ...] | None = None  # (position, target, fov)
 
     @classmethod
     def from_scene(cls, scene: Scene, files: Any = None) -> "RenderSettings":
@@ -225,7 +230,21 @@ def _render_rules(base: Path) -> V.record:
             "cubemap": opt(V.list_of(image, length=6, what="image paths (+x, -x, +y, -y, +z, -z)")),
         })),
         "wireframe": opt(V.record({"color_by_family": opt(V.boolean)})),
+        "views": opt(V.then(V.list_of(V.record({
+            "position": V.required(vec),
+            "target": V.required(vec),
+            "fov": opt(V.number(gt=0.0, le=179.0)),
+        }), nonempty=True, what="cameras {position, target, fov}"), _views)),
     })
+
+
+def _views(value: tuple[dict[str, Any], ...], at: V.At) -> tuple[tuple[Vec3, Vec3, float | None], ...]:
+    out = []
+    for k, v in enumerate(value):
+        if tuple(v["position"]) == tuple(v["target"]):
+            raise at.index(k).fail("position and target coincide")
+        out.append((v["position"], v["target"], v.get("fov")))
+    return tuple(out)
 
 
 _NESTED = ("camera", "light", "phong", "textures", "wireframe")

@@ -23,6 +23,7 @@ from ..errors import ClothsimError
 from ..scene import Scene, load_scene, resolve_scene_path
 from ..validate import check, integer
 from . import dataset as ds
+from . import meta as M
 from . import params as P
 from . import sheet as S
 from .runner import Task, sample_frames
@@ -62,6 +63,12 @@ def _output_kind(out: str | os.PathLike[str]) -> str:
     text = os.fspath(out)
     if not text:
         raise ClothsimError("-o: output path is empty")
+    from .store import is_url
+
+    if is_url(text):
+        if text.rstrip("/").lower().endswith(".png"):
+            raise ClothsimError(f"{text}: a contact sheet is a local .png; a URL is for a dataset")
+        return "dataset"
     check_name(text)
     p = Path(text)
     if p.suffix.lower() == ".png" and not text.endswith(("/", os.sep)):
@@ -77,8 +84,10 @@ def _output_kind(out: str | os.PathLike[str]) -> str:
 def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[str], *,
           frames: int | list[int] = 90, every: int = 1, samples: int | None = None, seed: int | None = None,
           shader: str | None = None, size: tuple[int, int] | str | None = None, workers: int | None = None,
-          scheduler: str | None = None, video: bool = False, progress: bool = False,
-          report: bool = False) -> list[dict[str, Any]]:
+          scheduler: str | None = None, video: bool = False, views: int = 0,
+          channels: str | list[str] | tuple[str, ...] | None = None,
+          split: str | tuple[float, float, float] | None = None, split_seed: int = 0,
+          write_in_workers: bool = False, progress: bool = False, report: bool = False) -> list[dict[str, Any]]:
     """Run ``scene`` once per parameter set and write ``out``; return one record per run.
 
     ``grid_or_samples`` maps dotted field paths to values: ``{"cloth.ks": [10, 5000],
@@ -94,9 +103,21 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
     the same dataset had finished the run); a run lost with a worker that died (local or Dask) is
     ``failed`` with ``lost`` True, is not written to the manifest, and is run by the next sweep.
 
+    ``views=N`` (a dataset) draws every sampled frame from N fixed cameras (the scene's
+    ``render.views``, or drawn around the cloth from the run's index and ``seed``) into
+    ``runs/<id>/``: the ``channels`` asked for (default all of ``rgb, depth, normal, mask, flow``)
+    and ``cameras.json``. ``split`` (train, valid, test fractions, default 0.8, 0.1, 0.1) and
+    ``split_seed`` assign each run to a split in ``meta.json`` (see docs/datasets.md).
+
+    ``write_in_workers`` has the workers write each run's files straight into ``out`` (a folder
+    every worker reaches); only the manifest lines travel back. ``out`` may also be an fsspec
+    URL (``memory://``, ``s3://bucket/prefix``), which the workers always write directly.
+
     A dataset folder is locked while the sweep runs: another sweep into it (or this one started
     again) raises :class:`~clothsim.ClothsimError` naming the holder, and writes nothing.
     """
+    from ..render.channels import CHANNELS
+
     from ..render.settings import RenderSettings, parse_size
 
     start = time.perf_counter()
@@ -107,6 +128,23 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
         raise ClothsimError("--frames: a list of frames is for a contact sheet (.png); a dataset takes one count")
     if kind == "sheet" and video:
         raise ClothsimError("--video: needs a dataset folder as OUT, not a .png")
+    views = check(integer(ge=0, le=64), views, "--views")
+    if kind == "sheet" and views:
+        raise ClothsimError("--views: needs a dataset folder as OUT, not a .png")
+    if channels is not None and not views:
+        raise ClothsimError("--channels: goes with --views N")
+    channel_list: list[str] = []
+    if views:
+        given = channels.split(",") if isinstance(channels, str) else list(channels or CHANNELS)
+        given = [str(c).strip() for c in given if str(c).strip()]
+        for c in given:
+            if c not in CHANNELS:
+                raise ClothsimError(f"--channels: unknown channel {c!r} (expected some of: {', '.join(CHANNELS)})")
+        if not given:
+            raise ClothsimError(f"--channels: none given (expected some of: {', '.join(CHANNELS)})")
+        channel_list = [c for c in CHANNELS if c in given]
+    fractions = M.parse_split(split)
+    split_seed = check(integer(ge=0, le=2**63 - 1), split_seed, "--split-seed")
     if samples is not None:
         samples = check(integer(ge=1), samples, "--samples")
         seed = check(integer(ge=0, le=2**63 - 1), seed, "--seed") if seed is not None else None
@@ -127,7 +165,7 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
     base, path = _base_scene(scene)
 
     # Every run's scene, built and validated before anything runs or is written.
-    draws = kind == "sheet" or video
+    draws = kind == "sheet" or video or bool(views)
     scenes: dict[str, Scene] = {}
     settings: dict[str, Any] = {}
     overrides = {k: v for k, v in (("shader", shader), ("size", f"{cell_size[0]}x{cell_size[1]}")) if v is not None}
@@ -146,17 +184,46 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
         "scene": base, "scene_path": os.path.basename(path),
         "params": {f: [str(v) if isinstance(v, P.Distribution) else v for v in vs] for f, vs in space.items()},
         "samples": samples, "seed": seed, "frames": last, "every": every, "video": bool(video),
-        "size": list(cell_size) if video else None, "shader": shader if video else None,
+        "size": list(cell_size) if (video or views) else None, "shader": shader if (video or views) else None,
     }
+    if views:
+        # Only with views, so that a dataset written before they existed resumes as it was.
+        listed = settings[runs[0].id].views
+        definition.update(views=views, channels=channel_list,
+                          cameras_from="render.views" if listed else "drawn")
+        for run in runs:
+            listed = settings[run.id].views
+            if listed is not None and len(listed) < views:
+                raise ClothsimError(f"--views {views}: render.views lists only {len(listed)} cameras ({run.id})")
+    from .store import is_url, remote_dataset
+
+    remote = kind == "dataset" and is_url(os.fspath(out))
+    if write_in_workers and kind != "dataset":
+        raise ClothsimError("--write-in-workers: needs a dataset folder as OUT, not a .png")
+    direct = bool(write_in_workers) or remote
     data: ds.Dataset | None = None
     if kind == "dataset":
-        data = ds.Dataset(out, definition)
+        data = remote_dataset(os.fspath(out), definition) if remote else ds.Dataset(out, definition)
         data.open()  # locked from here: close() below, however the sweep ends
     else:
         check_destination(out, label=os.fspath(out))
+    if data is not None:
+        first = scenes[runs[0].id]
+        from ..render.channels import collider_ids
+
+        description = M.describe(definition, runs, fractions, split_seed, collider_ids(first) if views else [],
+                                 (first.cloth.num_width_points, first.cloth.num_height_points))
+        description["frames_per_second"] = first.simulation.frames_per_sec
+        data.meta = description
+        sampled = samples is not None
+        data.splits = {r.id: M.split_of(r.id, r.params, sampled, fractions, split_seed) for r in runs}
     try:
         records, images, lost = _run_all(runs, scenes, settings, data, out, kind, frame_list, last, every, seed,
-                                 cell_size, video, workers, scheduler, progress)
+                                 cell_size, video, workers, scheduler, progress, views, tuple(channel_list),
+                                 os.fspath(data.out.resolve()) if direct and not remote and data is not None
+                                 else (os.fspath(out) if remote else None))
+        if data is not None and data.has_definition():
+            data.write_meta(data.meta)  # also when a resume had nothing left to run
     finally:
         if data is not None:
             data.close()
@@ -177,7 +244,8 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
 def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, Any], data: ds.Dataset | None,
              out: Any, kind: str, frame_list: list[int], last: int, every: int, seed: int | None,
              cell_size: tuple[int, int], video: bool, workers: int | None, scheduler: str | None,
-             progress: bool) -> tuple[dict[str, dict[str, Any]], dict[tuple[str, int], np.ndarray | None], int]:
+             progress: bool, views: int = 0, channels: tuple[str, ...] = (),
+             write_to: str | None = None) -> tuple[dict[str, dict[str, Any]], dict[tuple[str, int], np.ndarray | None], int]:
     """Run every run not finished yet; return the records by id, a contact sheet's cells, and the
     number of runs lost with a worker."""
     finished: dict[str, dict[str, Any]] = {}
@@ -190,7 +258,8 @@ def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, An
     samples_msaa = {rid: s.samples for rid, s in settings.items()}
     tasks = [Task(id=r.id, scene=scenes[r.id], frames=last, every=every, positions=kind == "dataset",
                   cells=tuple(frame_list) if kind == "sheet" else (), video=bool(video),
-                  settings=settings.get(r.id), size=cell_size, samples=samples_msaa.get(r.id, 4), threads=1)
+                  settings=settings.get(r.id), size=cell_size, samples=samples_msaa.get(r.id, 4), threads=1,
+                  views=views, channels=channels, view_seed=(seed or 0, r.index, 1), write_to=write_to)
              for r in runs if r.id not in finished]
     by_id = {r.id: r for r in runs}
     records: dict[str, dict[str, Any]] = {rid: {**rec, "skipped": True} for rid, rec in finished.items()}
@@ -203,19 +272,19 @@ def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, An
                   "error": result["error"], "path": None, "frames": last, "seconds": round(result["seconds"], 3)}
         if data is not None:
             if result["status"] == "done":
-                sc = scenes[run.id]
-                from ..cloth import cloth_triangles, cloth_uvs  # not the renderer's module: no Numba here
-
-                arrays = {
-                    "positions": result["positions"],
-                    "faces": cloth_triangles(result["nw"], result["nh"]).astype(np.int32).reshape(-1, 3),
-                    "uv": np.asarray(cloth_uvs(result["nw"], result["nh"]), dtype=np.float32),
-                    "pinned": np.asarray(result["pinned"], dtype=bool),
-                    "scene": np.array(json.dumps(P.scene_json(sc))),
-                    "frames": np.array(sample_frames(last, every), dtype=np.int64),
-                }
-                fps = sc.simulation.frames_per_sec / every
-                record["path"] = data.write_run(run.id, arrays, result["video"], fps)
+                if result.get("written"):  # the worker wrote the files into OUT itself
+                    record["path"] = result["written"]
+                else:
+                    sc = scenes[run.id]
+                    arrays = ds.run_arrays(result["positions"], result["nw"], result["nh"], result["pinned"], sc,
+                                           sample_frames(last, every), P.scene_json(sc))
+                    fps = sc.simulation.frames_per_sec / every
+                    record["path"] = data.write_run(run.id, arrays, result["video"], fps)
+                    if result.get("views") is not None:
+                        data.write_views(run.id, result["views"], sample_frames(last, every))
+            record["split"] = data.splits[run.id]
+            if views:
+                record["render_seconds"] = round(result.get("render_seconds", 0.0), 3)
             data.append(record)
         else:
             for f in frame_list:
@@ -237,6 +306,8 @@ def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, An
                     task = futures.pop(future)  # drop the result with it once written: memory stays flat
                     try:
                         result = future.result()
+                        if result.get("write_failed"):
+                            raise _WriteFailed(result["error"])
                     except Exception as exc:  # noqa: BLE001 - the run itself never raises (runner.run)
                         # A local worker that died (BrokenProcessPool), a Dask worker lost with the
                         # run (KilledWorker), a transfer that failed: the run has no result, which
@@ -254,8 +325,14 @@ def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, An
     return records, images, lost
 
 
+class _WriteFailed(Exception):
+    """A worker ran the run but could not write its files into OUT."""
+
+
 def _lost_reason(exc: BaseException) -> str:
-    if isinstance(exc, concurrent.futures.process.BrokenProcessPool):
+    if isinstance(exc, _WriteFailed):
+        why = str(exc)
+    elif isinstance(exc, concurrent.futures.process.BrokenProcessPool):
         why = "the worker process running it died"
     else:
         why = " ".join(f"{type(exc).__name__}: {exc}".split())

@@ -17,7 +17,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             "grid order, last --set fastest); --samples N --seed S draws N runs instead. OUT ending in .png is a "
             "contact sheet of each run's last frame (or of each frame listed in --frames) as 'clothsim render' "
             "draws it; any other OUT is a dataset folder: manifest.jsonl and runs/<id>.npz (positions every "
-            "--every frames), resumed by re-running the same command. Every run's scene is validated first."
+            "--every frames; with --views, images, depth, normals, masks, flow and cameras per run; meta.json describes "
+            "every field and the train/valid/test split), resumed by re-running the same command. Every run's scene "
+            "is validated first."
         ),
     )
     p.add_argument("scene", help="scene file or bundled scene name")
@@ -30,7 +32,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="frames to simulate (default 90); for a .png a comma-separated list draws one cell per frame")
     p.add_argument("--every", type=int, default=1, metavar="K", help="dataset: keep positions every K frames (default 1)")
     p.add_argument("--shader", help="look of the images (default: the scene's, else phong)")
-    p.add_argument("--size", metavar="WxH", help="image size of a cell or video frame (default 256x256)")
+    p.add_argument("--size", metavar="WxH", help="image size of a cell, video frame or view (default 256x256)")
     p.add_argument("--samples", type=int, metavar="N", help="draw N runs at random instead of the grid (needs --seed)")
     p.add_argument("--seed", type=int, metavar="S", help="seed of --samples: run i's parameters depend on S and i only")
     where = p.add_mutually_exclusive_group()
@@ -38,6 +40,17 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="run on an existing Dask cluster, e.g. tcp://host:8786 (pip install 'clothsim[cluster]')")
     p.add_argument("--video", action="store_true", help="dataset: also write runs/<id>.mp4 of the sampled frames")
+    p.add_argument("--views", type=int, default=0, metavar="N",
+                   help="dataset: draw every sampled frame from N fixed cameras (the scene's render.views, else "
+                        "drawn around the cloth from the run's seed) into runs/<id>/")
+    p.add_argument("--channels", metavar="LIST",
+                   help="with --views: comma-separated channels of rgb,depth,normal,mask,flow (default all)")
+    p.add_argument("--write-in-workers", action="store_true",
+                   help="dataset: each worker writes its runs' files straight into OUT (a folder every worker "
+                        "reaches); an fsspec URL as OUT (memory://, s3://...) is always written so")
+    p.add_argument("--split", metavar="TRAIN,VALID,TEST",
+                   help="dataset: fractions of the train/valid/test split in meta.json (default 0.8,0.1,0.1)")
+    p.add_argument("--split-seed", type=int, default=0, metavar="S", help="dataset: seed of the split (default 0)")
     p.set_defaults(func=run_sweep, kernels=False)  # the workers run them
 
 
@@ -66,5 +79,7 @@ def run_sweep(args: argparse.Namespace) -> int:
         import_distributed()
     records = sweep(args.scene, space, args.output, frames=frames, every=args.every, samples=args.samples,
                     seed=args.seed, shader=args.shader, size=args.size, workers=args.workers,
-                    scheduler=args.scheduler, video=args.video, progress=True, report=True)
+                    scheduler=args.scheduler, video=args.video, views=args.views, channels=args.channels,
+                    split=args.split, split_seed=args.split_seed, write_in_workers=args.write_in_workers,
+                    progress=True, report=True)
     return 1 if any(r["status"] == "failed" for r in records) else 0
