@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from fractions import Fraction
+
 import numpy as np
 
 from clothsim.sim.crossings import mesh_edges
@@ -27,3 +29,30 @@ def brute_force_pairs(points: np.ndarray, triangles: np.ndarray) -> set[tuple[in
     shares = ((edges[:, None, 0:1] == tris[None, :, :]) | (edges[:, None, 1:2] == tris[None, :, :])).any(axis=2)
     hit = (sp * sq < 0) & (s1 != 0) & (s1 == s2) & (s2 == s3) & ~shares
     return {(int(e), int(t)) for e, t in zip(*np.nonzero(hit))}
+
+
+def _exact_sign(a, b, c, d) -> int:  # noqa: ANN001
+    """Sign of det[a-d; b-d; c-d] in rational arithmetic (each float is an exact rational)."""
+    m = [[Fraction(float(x)) - Fraction(float(y)) for x, y in zip(r, d)] for r in (a, b, c)]
+    det = (m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+           + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]))
+    return (det > 0) - (det < 0)
+
+
+def exact_brute_force_pairs(points: np.ndarray, triangles: np.ndarray) -> set[tuple[int, int]]:
+    """:func:`brute_force_pairs` in exact rational arithmetic, pair by pair (small meshes only)."""
+    tris = np.asarray(triangles).reshape(-1, 3)
+    edges = mesh_edges(tris)
+    out = set()
+    for e, (i, j) in enumerate(edges):
+        p, q = points[i], points[j]
+        for t, (ia, ib, ic) in enumerate(tris):
+            if {int(i), int(j)} & {int(ia), int(ib), int(ic)}:
+                continue
+            a, b, c = points[ia], points[ib], points[ic]
+            if _exact_sign(a, b, c, p) * _exact_sign(a, b, c, q) >= 0:
+                continue
+            s = (_exact_sign(p, q, a, b), _exact_sign(p, q, b, c), _exact_sign(p, q, c, a))
+            if s[0] != 0 and s[0] == s[1] == s[2]:
+                out.add((e, t))
+    return out
