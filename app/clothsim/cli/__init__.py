@@ -22,6 +22,7 @@ examples:
   clothsim export sphere --frames 180 -o sphere.usd   # or -o sphere_obj/ for an OBJ sequence
   clothsim sweep selfCollision --set cloth.density=1,15,1000 --set cloth.ks=10,5000,200000 -o sheet.png
   clothsim serve sphere            # the interactive GUI in a browser (prints the URL to open)
+  clothsim check-intersections sphere.npz   # does the cloth pass through itself?
   clothsim bench speed
   clothsim compile                 # compile every kernel now (images, CI caches, cluster workers)
 """
@@ -64,6 +65,10 @@ def build_parser() -> argparse.ArgumentParser:
     from ..serve.command import add_parser as add_serve_parser
 
     add_serve_parser(sub)
+
+    from .crossings import add_parser as add_crossings_parser
+
+    add_crossings_parser(sub)
     bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling, sweep, colliders, serve",
                            description="Benchmarks that print figures measured on this machine.")
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
