@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from fractions import Fraction
 
 import numpy as np
@@ -56,3 +57,46 @@ def exact_brute_force_pairs(points: np.ndarray, triangles: np.ndarray) -> set[tu
             if s[0] != 0 and s[0] == s[1] == s[2]:
                 out.add((e, t))
     return out
+
+
+# ----------------------------------------------------------------------------------------------
+# The stress set, frame by frame
+
+#: Grid and frames of the tests (the benchmark uses 50 x 50 and longer runs).
+STRESS_GRID = 20
+STRESS_FRAMES = 120
+#: The twist in tests: each edge a full turn in 1.2 s (done by frame 117 of 120).
+STRESS_TWIST_SECONDS = 1.2
+
+
+@dataclass
+class StressRecord:
+    """Crossings at the end of each frame run, and the frame that blew up (None if none)."""
+
+    scene: str
+    mode: str
+    counts: list[int]
+    blew_up: int | None
+
+    def summary(self) -> str:
+        worst = int(np.argmax(self.counts)) if self.counts else 0
+        most = self.counts[worst] if self.counts else 0
+        end = f", blew up at frame {self.blew_up}" if self.blew_up is not None else ""
+        return (f"{self.mode} on {self.scene}: max {most} crossings (frame {worst + 1}), "
+                f"final {self.counts[-1] if self.counts else 0}{end}")
+
+
+def stress_record(scene: str, mode: str, frames: int = STRESS_FRAMES, grid: int = STRESS_GRID) -> StressRecord:
+    """Run stress scene ``scene`` in ``mode`` and count crossings at the end of every frame."""
+    from clothsim.bench.stress import StressRun
+    from clothsim.errors import SimulationBlowUp
+
+    run = StressRun(scene, mode, grid, twist_seconds=STRESS_TWIST_SECONDS)
+    counts: list[int] = []
+    for f in range(1, frames + 1):
+        try:
+            run.frame()
+        except SimulationBlowUp:
+            return StressRecord(scene, mode, counts, f)
+        counts.append(run.crossings())
+    return StressRecord(scene, mode, counts, None)

@@ -68,13 +68,14 @@ def twist_scene(n: int = 50) -> Scene:
     return replace(scene, planes=(), path="<twist>").with_simulation(gravity=(0.0, 0.0, 0.0))
 
 
-def twist_pose(rest: np.ndarray, top: np.ndarray, t: float) -> np.ndarray:
+def twist_pose(rest: np.ndarray, top: np.ndarray, t: float, seconds: float = TWIST_SECONDS) -> np.ndarray:
     """The pinned points at time ``t``: ``rest`` (P, 3) turned about the vertical line x = 0.5,
-    z = 0, the top ones (``top``, a mask) one way and the others the other way, each edge moved
-    towards the middle by up to TWIST_APPROACH."""
-    s = _smoothstep((t - TWIST_START) / TWIST_SECONDS)
+    z = 0, the top ones (``top``, a mask) one way and the others the other way, TWIST_TURNS turns
+    each in ``seconds`` from TWIST_START, each edge moved towards the middle by up to
+    TWIST_APPROACH."""
+    s = _smoothstep((t - TWIST_START) / seconds)
     # the edges come together over the first half of the turn: the cloth has slack to wring into
-    a = _smoothstep(2.0 * (t - TWIST_START) / TWIST_SECONDS)
+    a = _smoothstep(2.0 * (t - TWIST_START) / seconds)
     angle = np.where(top, 1.0, -1.0) * 2.0 * math.pi * TWIST_TURNS * s
     x, z = rest[:, 0] - 0.5, rest[:, 2]
     out = np.empty_like(rest)
@@ -92,9 +93,10 @@ def _smoothstep(x: float) -> float:
 
 class StressRun:
     """One run of the stress set in one self-collision mode: :meth:`frame` advances one frame,
-    :attr:`sim` is the :class:`~clothsim.Simulation` (its positions, its ``crossings()``)."""
+    :attr:`sim` is the :class:`~clothsim.Simulation` (its positions, its ``crossings()``).
+    ``twist_seconds`` is how long the twist's edges take to turn (shorter runs for tests)."""
 
-    def __init__(self, name: str, mode: str, n: int = 50) -> None:
+    def __init__(self, name: str, mode: str, n: int = 50, *, twist_seconds: float = TWIST_SECONDS) -> None:
         from ..sim import Simulation
 
         if name not in STRESS_SCENES:
@@ -118,12 +120,12 @@ class StressRun:
             # at most 1.5x their mean speed (the smoothstep's steepest)
             radius = float(np.max(np.hypot(rest[:, 0] - 0.5, rest[:, 2])))
             self.sim.collider_top_speed += 1.5 * (2.0 * math.pi * TWIST_TURNS * radius
-                                                  + 2.0 * TWIST_APPROACH) / TWIST_SECONDS
+                                                  + 2.0 * TWIST_APPROACH) / twist_seconds
 
             def substep() -> None:
                 t = self.sim.time
-                self.sim.last_positions[pins] = twist_pose(rest, top, t - dt)
-                self.sim.positions[pins] = twist_pose(rest, top, t)
+                self.sim.last_positions[pins] = twist_pose(rest, top, t - dt, twist_seconds)
+                self.sim.positions[pins] = twist_pose(rest, top, t, twist_seconds)
                 self.sim.step(1)
 
             self._substep = substep
@@ -146,9 +148,11 @@ class StressRun:
         return self.sim.crossings()
 
 
-def crossings_per_frame(name: str, mode: str, frames: int, n: int = 50) -> list[int]:
-    """Crossings at the end of each of ``frames`` frames of stress run ``name`` in ``mode``."""
-    run = StressRun(name, mode, n)
+def crossings_per_frame(name: str, mode: str, frames: int, n: int = 50, *,
+                        twist_seconds: float = TWIST_SECONDS) -> list[int]:
+    """Crossings at the end of each of ``frames`` frames of stress run ``name`` in ``mode`` (a
+    run that blows up raises :class:`~clothsim.errors.SimulationBlowUp`)."""
+    run = StressRun(name, mode, n, twist_seconds=twist_seconds)
     out = []
     for _ in range(frames):
         run.frame()
