@@ -28,6 +28,8 @@ the cost grows with the number of edges, not edges times triangles.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from numba import njit
 
@@ -154,23 +156,19 @@ def _exact_orient_sign(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarra
     return 1 if acc[n - 1] > 0.0 else -1
 
 
-@njit(**EXACT)
-def orient3d_sign(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> int:
-    """Exact sign of det[a-d; b-d; c-d]: +1 when ``d`` lies below the plane of ``a, b, c`` (seen
-    with ``a, b, c`` counter-clockwise from above), -1 above, 0 on it.
-
-    A float64 determinant whose magnitude exceeds Shewchuk's bound is taken as it is; otherwise the
-    sign is computed exactly.
-    """
-    adx = a[0] - d[0]
-    ady = a[1] - d[1]
-    adz = a[2] - d[2]
-    bdx = b[0] - d[0]
-    bdy = b[1] - d[1]
-    bdz = b[2] - d[2]
-    cdx = c[0] - d[0]
-    cdy = c[1] - d[1]
-    cdz = c[2] - d[2]
+@njit(inline="always", **EXACT)
+def _orient(ax: float, ay: float, az: float, bx: float, by: float, bz: float, cx: float, cy: float, cz: float,
+            dx: float, dy: float, dz: float) -> int:
+    """:func:`orient3d_sign` of points given by their coordinates (no arrays on the hot path)."""
+    adx = ax - dx
+    ady = ay - dy
+    adz = az - dz
+    bdx = bx - dx
+    bdy = by - dy
+    bdz = bz - dz
+    cdx = cx - dx
+    cdy = cy - dy
+    cdz = cz - dz
     bdxcdy = bdx * cdy
     cdxbdy = cdx * bdy
     cdxady = cdx * ady
@@ -180,31 +178,64 @@ def orient3d_sign(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) ->
     det = adz * (bdxcdy - cdxbdy) + bdz * (cdxady - adxcdy) + cdz * (adxbdy - bdxady)
     permanent = ((abs(bdxcdy) + abs(cdxbdy)) * abs(adz) + (abs(cdxady) + abs(adxcdy)) * abs(bdz)
                  + (abs(adxbdy) + abs(bdxady)) * abs(cdz))
+    if permanent == 0.0:
+        # every product holds a zero difference (a rounded difference is 0 only when the
+        # coordinates are equal, and no product underflows): the exact determinant is 0 too. A
+        # flat cloth takes this way for every pair.
+        return 0
     bound = _O3D_BOUND * permanent
     if det > bound:
         return 1
     if -det > bound:
         return -1
-    return _exact_orient_sign(a, b, c, d)
+    return _exact_orient_sign(np.array([ax, ay, az]), np.array([bx, by, bz]), np.array([cx, cy, cz]),
+                              np.array([dx, dy, dz]))
+
+
+@njit(**EXACT)
+def orient3d_sign(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> int:
+    """Exact sign of det[a-d; b-d; c-d]: +1 when ``d`` lies below the plane of ``a, b, c`` (seen
+    with ``a, b, c`` counter-clockwise from above), -1 above, 0 on it.
+
+    A float64 determinant whose magnitude exceeds Shewchuk's bound is taken as it is; otherwise the
+    sign is computed exactly.
+    """
+    return _orient(a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2], d[0], d[1], d[2])
+
+
+@njit(inline="always", **EXACT)
+def _crosses(pts: np.ndarray, i: int, j: int, a: int, b: int, c: int) -> bool:
+    """:func:`segment_crosses_triangle` of points ``i``, ``j`` and ``a``, ``b``, ``c`` of ``pts``."""
+    px, py, pz = pts[i, 0], pts[i, 1], pts[i, 2]
+    qx, qy, qz = pts[j, 0], pts[j, 1], pts[j, 2]
+    ax, ay, az = pts[a, 0], pts[a, 1], pts[a, 2]
+    bx, by, bz = pts[b, 0], pts[b, 1], pts[b, 2]
+    cx, cy, cz = pts[c, 0], pts[c, 1], pts[c, 2]
+    sp = _orient(ax, ay, az, bx, by, bz, cx, cy, cz, px, py, pz)
+    if sp == 0:
+        return False
+    sq = _orient(ax, ay, az, bx, by, bz, cx, cy, cz, qx, qy, qz)
+    if sq == 0 or sq == sp:
+        return False
+    s1 = _orient(px, py, pz, qx, qy, qz, ax, ay, az, bx, by, bz)
+    if s1 == 0:
+        return False
+    if _orient(px, py, pz, qx, qy, qz, bx, by, bz, cx, cy, cz) != s1:
+        return False
+    return _orient(px, py, pz, qx, qy, qz, cx, cy, cz, ax, ay, az) == s1
 
 
 @njit(**EXACT)
 def segment_crosses_triangle(p: np.ndarray, q: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray) -> bool:
     """True when segment ``pq`` passes through the interior of triangle ``abc`` transversally
     (the module's rule: every touching or coplanar contact is False)."""
-    sp = orient3d_sign(a, b, c, p)
-    if sp == 0:
-        return False
-    sq = orient3d_sign(a, b, c, q)
-    if sq == 0 or sq == sp:
-        return False
-    s1 = orient3d_sign(p, q, a, b)
-    if s1 == 0:
-        return False
-    s2 = orient3d_sign(p, q, b, c)
-    if s2 != s1:
-        return False
-    return orient3d_sign(p, q, c, a) == s1
+    pts = np.empty((5, 3))
+    pts[0] = p
+    pts[1] = q
+    pts[2] = a
+    pts[3] = b
+    pts[4] = c
+    return _crosses(pts, 0, 1, 2, 3, 4)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -272,11 +303,9 @@ def _count(points: np.ndarray, tris: np.ndarray, edges: np.ndarray, boxes: np.nd
     for e in range(edges.shape[0]):
         i = edges[e, 0]
         j = edges[e, 1]
-        p = points[i]
-        q = points[j]
         for k in range(3):
-            lo[k] = min(p[k], q[k])
-            hi[k] = max(p[k], q[k])
+            lo[k] = min(points[i, k], points[j, k])
+            hi[k] = max(points[i, k], points[j, k])
         c0 = np.int64(np.floor(lo[0] / h))
         c1 = np.int64(np.floor(lo[1] / h))
         c2 = np.int64(np.floor(lo[2] / h))
@@ -300,7 +329,7 @@ def _count(points: np.ndarray, tris: np.ndarray, edges: np.ndarray, boxes: np.nd
                         if (hi[0] < boxes[t, 0] or lo[0] > boxes[t, 3] or hi[1] < boxes[t, 1]
                                 or lo[1] > boxes[t, 4] or hi[2] < boxes[t, 2] or lo[2] > boxes[t, 5]):
                             continue
-                        if segment_crosses_triangle(p, q, points[a], points[b], points[c]):
+                        if _crosses(points, i, j, a, b, c):
                             if found < pairs.shape[0]:
                                 pairs[found, 0] = e
                                 pairs[found, 1] = t
@@ -316,9 +345,16 @@ def mesh_edges(triangles: np.ndarray) -> np.ndarray:
     """The unique edges (E, 2) int64 of a triangle list (T, 3), each as (low, high) point index,
     sorted."""
     tris = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
-    e = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
-    e.sort(axis=1)
-    return np.unique(e, axis=0)
+    if len(tris) == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    first = np.concatenate([tris[:, 0], tris[:, 1], tris[:, 2]])
+    second = np.concatenate([tris[:, 1], tris[:, 2], tris[:, 0]])
+    # one int64 key per edge, (low, high), sorted and deduplicated (np.unique, rows or not, took
+    # 20x longer than the sort on NumPy 2.4)
+    base = int(tris.max()) + 1
+    keys = np.sort(np.minimum(first, second) * base + np.maximum(first, second))
+    keys = keys[np.r_[True, keys[1:] != keys[:-1]]]
+    return np.column_stack([keys // base, keys % base])
 
 
 def grid_triangles(nw: int, nh: int) -> np.ndarray:
@@ -326,11 +362,21 @@ def grid_triangles(nw: int, nh: int) -> np.ndarray:
     return cloth_triangles(nw, nh).astype(np.int64).reshape(-1, 3)
 
 
+@functools.lru_cache(maxsize=8)
+def _grid_mesh(nw: int, nh: int) -> tuple[np.ndarray, np.ndarray]:
+    """(triangles, edges) of a grid, built once per size (a run counts every frame), read-only."""
+    tris = grid_triangles(nw, nh)
+    edges = mesh_edges(tris)
+    tris.flags.writeable = False
+    edges.flags.writeable = False
+    return tris, edges
+
+
 def _cell_size(points: np.ndarray, tris: np.ndarray, edges: np.ndarray) -> float:
     if len(edges) == 0:
         return 1.0
-    lengths = np.linalg.norm(points[edges[:, 1]] - points[edges[:, 0]], axis=1)
-    h = float(lengths.mean())
+    d = points[edges[:, 1]] - points[edges[:, 0]]
+    h = float(np.sqrt(np.einsum("ij,ij->i", d, d)).mean())
     extent = float(np.max(np.abs(points))) if points.size else 0.0
     # a cell far below the coordinates' size would make floor(x / h) overflow
     return max(h, extent * 1e-12, 1e-300) if h > 0.0 else max(extent, 1.0)
@@ -386,7 +432,8 @@ def count_crossings(positions: np.ndarray, nw: int, nh: int) -> int:
     pts = np.asarray(positions)
     if pts.ndim != 2 or pts.shape != (nw * nh, 3):
         raise ValueError(f"positions: expected shape ({nw * nh}, 3) for a {nw}x{nh} grid, got {pts.shape}")
-    return int(mesh_crossings(pts, grid_triangles(nw, nh)))
+    tris, edges = _grid_mesh(nw, nh)
+    return int(mesh_crossings(pts, tris, edges=edges))
 
 
 def crossing_pairs(positions: np.ndarray, nw: int, nh: int) -> np.ndarray:
@@ -396,7 +443,6 @@ def crossing_pairs(positions: np.ndarray, nw: int, nh: int) -> np.ndarray:
     pts = np.asarray(positions)
     if pts.ndim != 2 or pts.shape != (nw * nh, 3):
         raise ValueError(f"positions: expected shape ({nw * nh}, 3) for a {nw}x{nh} grid, got {pts.shape}")
-    tris = grid_triangles(nw, nh)
-    edges = mesh_edges(tris)
+    tris, edges = _grid_mesh(nw, nh)
     found = mesh_crossings(pts, tris, pairs=True, edges=edges)
     return np.column_stack([edges[found[:, 0]], found[:, 1]]).astype(np.int64)
