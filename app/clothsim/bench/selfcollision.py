@@ -97,6 +97,6 @@ def run(args: argparse.Namespace) -> int:
             note = f"blew up at frame {r.blew_up}" if r.blew_up is not None else ""
             print(f"{name:<15}{mode:<9}{ms:>10}{most:>15}{frame:>10}{final:>8}  {note}".rstrip(), flush=True)
     print(f"{args.grid}x{args.grid} points, {args.frames} frames; ms/frame = median over frames; crossings "
-          f"(edges through triangles they share no point with) after every {args.every}th frame and the last; "
-          "final = the last count before the end or a blow-up")
+          f"(edges through triangles they share no point with) counted every {args.every} frames and after the "
+          "last; final = the last count before the end or a blow-up")
     return 0
