@@ -335,3 +335,19 @@ def test_the_api_names() -> None:
     assert sim.crossings() == 0
     sim.step(40)
     assert sim.crossings() == count_crossings(sim.positions, 50, 50) > 0
+
+
+def test_bench_selfcollision_prints_a_row_per_scene_and_mode(tmp_path: Path) -> None:
+    from clothsim.bench.selfcollision import measure
+
+    out = _cli("bench", "selfcollision", "--grid", "10", "--frames", "40", "--every", "20", "--scenes", "selfCollision",
+               "twist", "--modes", "off", "spec", cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    rows = [line.split() for line in out.stdout.splitlines()[1:5]]
+    assert [r[:2] for r in rows] == [["selfCollision", "off"], ["selfCollision", "spec"], ["twist", "off"],
+                                     ["twist", "spec"]]
+    want = measure("selfCollision", "off", 40, 20, 10)
+    assert [int(x) for x in rows[0][3:6]] == [want.worst[1], want.worst[0], want.samples[-1][1]]
+    assert [f for f, _ in want.samples] == [20, 40] and len(want.ms) == 40
+    bad = _cli("bench", "selfcollision", "--modes", "nosuch", cwd=tmp_path)
+    assert bad.returncode == 2 and bad.stderr.startswith("clothsim: error: --modes: unknown self-collision mode 'nosuch'")
