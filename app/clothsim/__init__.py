@@ -9,7 +9,8 @@ from .scene import Scene, load_scene
 
 from .version import __version__
 
-__all__ = ["ClothsimError", "Renderer", "Scene", "SceneError", "Simulation", "export", "load_scene", "sweep", "__version__"]
+__all__ = ["ClothsimError", "Renderer", "Scene", "SceneError", "Simulation", "count_crossings", "export", "load_scene",
+           "sweep", "__version__"]
 
 
 def __getattr__(name: str) -> Any:
@@ -23,6 +24,10 @@ def __getattr__(name: str) -> Any:
         from .render.renderer import Renderer
 
         return Renderer
+    if name == "count_crossings":  # edge-triangle crossings of a cloth's positions (Numba)
+        from .sim.crossings import count_crossings
+
+        return count_crossings
     if name == "export":  # the function; its package is clothsim.exporters
         from .exporters.api import export
 

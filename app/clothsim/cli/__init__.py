@@ -14,7 +14,7 @@ from ..errors import ClothsimError
 EPILOG = """\
 scenes: a path to a course scene file (JSON with cloth/sphere/plane), or the bare name (no / and
 no .json) of a bundled scene: pinned2, pinned4, sphere, plane, selfCollision (the course's), flag,
-shake, capsule, curtain, tablecloth, mesh.
+shake, capsule, curtain, tablecloth, mesh, heap, push.
 
 examples:
   clothsim simulate scenes/sphere.json --frames 180 --out sphere.npz
@@ -22,6 +22,7 @@ examples:
   clothsim export sphere --frames 180 -o sphere.usd   # or -o sphere_obj/ for an OBJ sequence
   clothsim sweep selfCollision --set cloth.density=1,15,1000 --set cloth.ks=10,5000,200000 -o sheet.png
   clothsim serve sphere            # the interactive GUI in a browser (prints the URL to open)
+  clothsim check-intersections sphere.npz   # does the cloth pass through itself?
   clothsim bench speed
   clothsim compile                 # compile every kernel now (images, CI caches, cluster workers)
 """
@@ -64,7 +65,11 @@ def build_parser() -> argparse.ArgumentParser:
     from ..serve.command import add_parser as add_serve_parser
 
     add_serve_parser(sub)
-    bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling, sweep, colliders, serve",
+
+    from .crossings import add_parser as add_crossings_parser
+
+    add_crossings_parser(sub)
+    bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling, sweep, colliders, serve, selfcollision",
                            description="Benchmarks that print figures measured on this machine.")
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
     bench.set_defaults(func=lambda args: (bench.print_help(), 2)[1])
@@ -73,13 +78,15 @@ def build_parser() -> argparse.ArgumentParser:
     from ..bench import accuracy, scaling, speed, stability
     from ..bench import colliders as bench_colliders
     from ..bench import compile as bench_compile
+    from ..bench import selfcollision as bench_selfcollision
     from ..bench import serve as bench_serve
     from ..bench import sweep as bench_sweep
     from .render import add_parsers as add_render_parsers
 
     speed.add_parser(bench_sub)
     add_render_parsers(sub, bench_sub)
-    for module in (accuracy, stability, scaling, bench_compile, bench_sweep, bench_serve, bench_colliders):
+    for module in (accuracy, stability, scaling, bench_compile, bench_sweep, bench_serve, bench_colliders,
+                   bench_selfcollision):
         module.add_parser(bench_sub)
     compiling.add_parser(sub)
     return parser

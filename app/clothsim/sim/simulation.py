@@ -185,6 +185,14 @@ class Simulation:
         """Positions one substep earlier, (N, 3) float64 view."""
         return self._last.T
 
+    def crossings(self) -> int:
+        """Edge-triangle crossings of the cloth as it is now: how many (edge, triangle) pairs of its
+        render mesh that share no point have the edge passing through the triangle (exact; see
+        :mod:`clothsim.sim.crossings`). Zero for a cloth that does not pass through itself."""
+        from .crossings import count_crossings
+
+        return count_crossings(self.positions, self.nw, self.nh)
+
     @property
     def dt(self) -> float:
         """Substep length in seconds: 1 / (frames_per_sec * simulation_steps)."""

@@ -1,0 +1,160 @@
+"""The self-collision stress set: scenes where a cloth folds onto and around itself.
+
+Five runs, each on an ``n`` x ``n`` grid (50 x 50 in ``clothsim bench selfcollision``):
+
+- ``selfCollision``: the course's vertical cloth falling in folds onto a plane;
+- ``flag``: a flag in gusty wind, folding over itself at its free end;
+- ``heap``: a cloth whose top edge is lowered and carried sideways onto a floor, laid down in a
+  heap of folds (the bundled ``heap`` scene);
+- ``push``: a cloth lying on a floor, pushed into folds by a moving box (the bundled ``push``
+  scene);
+- ``twist``: a cloth held at its top and bottom edges, the two edges turned in opposite
+  directions a full turn each (two turns against each other) while they approach, so the cloth
+  wrings into a rope. A scene's motion tracks are translations, so this run is driven through the
+  public API: one substep per :meth:`Simulation.step` call, the pinned points set to the edges'
+  turned poses (and their last positions to the poses one substep earlier) before each substep.
+
+A bundled scene on another grid keeps its pins where they were (each new point is pinned when the
+nearest point of the scene's own grid is) and its thickness in proportion to the point spacing,
+so every size has the same neighbours per point in the self-collision hash.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from ..scene import SIMULATION, SELF_COLLISION_MODES, Scene, load_scene
+
+#: The runs of the stress set, in the order the benchmark prints them.
+STRESS_SCENES = ("selfCollision", "flag", "heap", "push", "twist")
+#: The twist: seconds before the edges start turning, seconds to turn, turns of each edge, and the
+#: distance each edge moves towards the middle meanwhile (m).
+TWIST_START = 0.1
+TWIST_SECONDS = 3.0
+TWIST_TURNS = 1.0
+TWIST_APPROACH = 0.3
+
+
+def self_collision_modes() -> tuple[str, ...]:
+    """Every ``simulation.self_collision`` mode the scene validator accepts, in its order."""
+    rule = SIMULATION.fields["self_collision"].rule
+    return tuple(getattr(rule, "options", SELF_COLLISION_MODES))
+
+
+def resized(scene: Scene, n: int) -> Scene:
+    """``scene`` on an ``n`` x ``n`` grid: pins kept in place, thickness scaled with the spacing."""
+    cloth = scene.cloth
+    nw, nh = cloth.num_width_points, cloth.num_height_points
+    old = set(cloth.pinned)
+    pins = tuple((x, y) for y in range(n) for x in range(n)
+                 if (round(x * (nw - 1) / (n - 1)), round(y * (nh - 1) / (n - 1))) in old)
+    thickness = cloth.thickness * (nw - 1) / (n - 1)
+    return scene.with_cloth(num_width_points=n, num_height_points=n, pinned=pins, thickness=thickness)
+
+
+def twist_scene(n: int = 50) -> Scene:
+    """The twist's scene: a 1 m x 1 m vertical cloth, its top and bottom rows pinned, no floor and
+    no gravity (the cloth wrings into a rope about the axis instead of sagging onto one side)."""
+    base = load_scene("selfCollision")
+    cloth = base.cloth
+    pins = tuple((x, y) for y in (0, n - 1) for x in range(n))
+    scene = base.with_cloth(num_width_points=n, num_height_points=n, pinned=pins,
+                            thickness=cloth.thickness * (cloth.num_width_points - 1) / (n - 1))
+    from dataclasses import replace
+
+    return replace(scene, planes=(), path="<twist>").with_simulation(gravity=(0.0, 0.0, 0.0))
+
+
+def twist_pose(rest: np.ndarray, top: np.ndarray, t: float, seconds: float = TWIST_SECONDS) -> np.ndarray:
+    """The pinned points at time ``t``: ``rest`` (P, 3) turned about the vertical line x = 0.5,
+    z = 0, the top ones (``top``, a mask) one way and the others the other way, TWIST_TURNS turns
+    each in ``seconds`` from TWIST_START, each edge moved towards the middle by up to
+    TWIST_APPROACH."""
+    s = _smoothstep((t - TWIST_START) / seconds)
+    # the edges come together over the first half of the turn: the cloth has slack to wring into
+    a = _smoothstep(2.0 * (t - TWIST_START) / seconds)
+    angle = np.where(top, 1.0, -1.0) * 2.0 * math.pi * TWIST_TURNS * s
+    x, z = rest[:, 0] - 0.5, rest[:, 2]
+    out = np.empty_like(rest)
+    out[:, 0] = 0.5 + x * np.cos(angle) - z * np.sin(angle)
+    out[:, 2] = x * np.sin(angle) + z * np.cos(angle)
+    out[:, 1] = rest[:, 1] + np.where(top, -1.0, 1.0) * TWIST_APPROACH * a
+    return out
+
+
+def _smoothstep(x: float) -> float:
+    """0 before 0, 1 after 1, and between them a cubic that starts and stops with zero slope."""
+    x = min(max(x, 0.0), 1.0)
+    return x * x * (3.0 - 2.0 * x)
+
+
+class StressRun:
+    """One run of the stress set in one self-collision mode: :meth:`frame` advances one frame,
+    :attr:`sim` is the :class:`~clothsim.Simulation` (its positions, its ``crossings()``).
+    ``twist_seconds`` is how long the twist's edges take to turn (shorter runs for tests)."""
+
+    def __init__(self, name: str, mode: str, n: int = 50, *, twist_seconds: float = TWIST_SECONDS) -> None:
+        from ..sim import Simulation
+
+        if name not in STRESS_SCENES:
+            raise ValueError(f"unknown stress scene {name!r} (expected one of: {', '.join(STRESS_SCENES)})")
+        self.name = name
+        self.mode = mode
+        scene = twist_scene(n) if name == "twist" else resized(load_scene(name), n)
+        self.steps = scene.simulation.simulation_steps
+        self._substep: Callable[[], None] | None = None
+        if name == "twist":
+            # one substep per call, of the same length as the scene's own
+            fps = scene.simulation.frames_per_sec * self.steps
+            scene = scene.with_simulation(simulation_steps=1, frames_per_sec=fps)
+        self.sim = Simulation(scene.with_simulation(self_collision=mode))
+        if name == "twist":
+            pins = np.flatnonzero(self.sim.pinned)
+            rest = self.sim.positions[pins].copy()
+            top = rest[:, 1] > 0.5
+            dt = self.sim.dt
+            # the blow-up guard allows the kinetic energy of what drives the cloth: here the edges,
+            # at most 1.5x their mean speed (the smoothstep's steepest)
+            radius = float(np.max(np.hypot(rest[:, 0] - 0.5, rest[:, 2])))
+            self.sim.collider_top_speed += 1.5 * (2.0 * math.pi * TWIST_TURNS * radius
+                                                  + 2.0 * TWIST_APPROACH) / twist_seconds
+
+            def substep() -> None:
+                t = self.sim.time
+                self.sim.last_positions[pins] = twist_pose(rest, top, t - dt, twist_seconds)
+                self.sim.positions[pins] = twist_pose(rest, top, t, twist_seconds)
+                self.sim.step(1)
+
+            self._substep = substep
+
+    @property
+    def frames(self) -> int:
+        """Frames advanced so far."""
+        return self.sim.frame // self.steps if self._substep is not None else self.sim.frame
+
+    def frame(self) -> None:
+        """Advance one frame (``simulation_steps`` substeps of the scene)."""
+        if self._substep is None:
+            self.sim.step(1)
+            return
+        for _ in range(self.steps):
+            self._substep()
+
+    def crossings(self) -> int:
+        """The cloth's edge-triangle crossings now."""
+        return self.sim.crossings()
+
+
+def crossings_per_frame(name: str, mode: str, frames: int, n: int = 50, *,
+                        twist_seconds: float = TWIST_SECONDS) -> list[int]:
+    """Crossings at the end of each of ``frames`` frames of stress run ``name`` in ``mode`` (a
+    run that blows up raises :class:`~clothsim.errors.SimulationBlowUp`)."""
+    run = StressRun(name, mode, n, twist_seconds=twist_seconds)
+    out = []
+    for _ in range(frames):
+        run.frame()
+        out.append(run.crossings())
+    return out
