@@ -25,6 +25,7 @@ from .context import create_context
 from .programs import Programs, set_uniform
 from .settings import (SHADERS, USES_COLOR_TEXTURE, USES_CUBEMAP, USES_HEIGHT_MAP, USES_TANGENTS,
                        RenderSettings, srgb_to_linear)
+from .waits import gl_calls
 
 GL_SRGB8_ALPHA8 = 0x8C43
 # Texture units, fixed per sampler so that binding order never matters.
@@ -130,6 +131,9 @@ class Renderer:
         self._vaos: dict[tuple[Any, ...], Any] = {}
         self._textures: dict[tuple[Any, ...], Any] = {}
         self._settings_for: tuple[Scene | None, RenderSettings | None] = (None, None)
+        # glFinish and glReadPixels without the GIL, so that a simulation thread runs while the
+        # driver draws (see waits.py); None: moderngl's own calls.
+        self._gl = gl_calls()
         self.timings: dict[str, float] = dict.fromkeys(STAGES, 0.0)
 
     # -- public --------------------------------------------------------------------------------
@@ -157,7 +161,7 @@ class Renderer:
             t2 = time.perf_counter()
             self._draw(simulation, look, settings, buffers)
             if self.profile:
-                self.ctx.finish()
+                self._finish()
             t3 = time.perf_counter()
             image = self._read()
             t4 = time.perf_counter()
@@ -448,6 +452,9 @@ class Renderer:
             ctx.disable(moderngl.CULL_FACE)
             ctx.polygon_offset = (0.0, 0.0)
         ctx.wireframe = False
+        # The driver draws in the call that first needs the pixels; wait here, without the GIL,
+        # rather than inside moderngl's resolve.
+        self._finish()
         ctx.copy_framebuffer(self._fbo, self._ms_fbo)  # resolves the multisampled image
 
     def _mesh_collider(self, spec: Any) -> tuple[Any, Any]:
@@ -530,9 +537,19 @@ class Renderer:
             self._cubemap(settings.cubemap).use(UNIT_CUBE)
             set_uniform(prog, "u_texture_cubemap", UNIT_CUBE)
 
+    def _finish(self) -> None:
+        if self._gl is not None:
+            self._gl.finish()
+        else:
+            self.ctx.finish()
+
     def _read(self) -> np.ndarray:
         image = np.empty((self.height, self.width, 3), dtype=np.uint8)
-        self._fbo.read_into(image, components=3, alignment=1)
+        if self._gl is not None:
+            self._gl.finish()  # the resolve, without the GIL
+            self._gl.read_rgb(self._fbo, image)
+        else:
+            self._fbo.read_into(image, components=3, alignment=1)
         return image
 
 
