@@ -67,10 +67,14 @@ def clip_frames(sim: Any, frames: int, every: int, still: bool, rest: Any, stats
     to simulate every frame. ``ahead`` 0 runs the simulation in the caller's thread.
     """
     plan = _Plan(sim, frames, every, still, rest, stats)
-    if ahead <= 0:
+    if ahead <= 0 or still:  # a still image draws once, at the end: nothing to overlap
         yield from plan.events()
         return
     yield from _threaded(plan, ahead)
+
+
+class _Stopped(Exception):
+    """The consumer is gone: the simulation thread ends before its next frame."""
 
 
 class _Plan:
@@ -80,9 +84,12 @@ class _Plan:
         self.sim, self.frames, self.every, self.still, self.rest, self.stats = sim, frames, every, still, rest, stats
         self.drawn = False
         self.frozen = False
+        self.stop: threading.Event | None = None  # set by the consumer of a threaded plan
 
     def advance(self) -> None:
         # A cloth at rest is not simulated any further: its state (and so its image) stays put.
+        if self.stop is not None and self.stop.is_set():
+            raise _Stopped
         stats, sim = self.stats, self.sim
         if stats.rested_at is None:
             t0 = time.perf_counter()
@@ -121,6 +128,7 @@ def _threaded(plan: _Plan, ahead: int) -> Iterator[Snapshot | None]:
     reach the consumer in order, and a consumer that stops early stops the thread."""
     out: queue.Queue[Any] = queue.Queue(maxsize=ahead)
     stop = threading.Event()
+    plan.stop = stop
 
     def put(item: Any) -> bool:
         while not stop.is_set():
@@ -136,6 +144,8 @@ def _threaded(plan: _Plan, ahead: int) -> Iterator[Snapshot | None]:
             for event in plan.events():
                 if not put(("frame", event)):
                     return
+        except _Stopped:
+            return
         except BaseException as exc:  # handed over, raised again in the consumer's thread
             put(("error", exc))
             return
