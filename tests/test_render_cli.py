@@ -108,3 +108,16 @@ def test_missing_egl_gives_one_line(monkeypatch):
     assert "\n" not in message
     for package in ("libegl1", "libegl-mesa0", "libgl1-mesa-dri"):
         assert package in message
+
+
+def test_bench_render_end_to_end(egl_available):
+    r = clothsim("bench", "render", "--end-to-end", "--clip-frames", "6", "--every", "2", "--repeats", "1",
+                 "--size", "64x64")
+    assert r.returncode == 0, r.stderr
+    assert "pinned2, phong, 64x64" in r.stdout
+    assert "6 frames simulated per clip, every 2: 4 drawn" in r.stdout
+    rows = {line.split()[0] + (" " + line.split()[1] if line.split()[1].isalpha() else ""): line
+            for line in r.stdout.splitlines()[3:]}
+    assert set(rows) == {"overlapped", "serial", "render only", "driver limit"}
+    for line in rows.values():
+        assert float(line.split()[-5]) > 0  # frames per second
