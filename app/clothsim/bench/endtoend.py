@@ -1,4 +1,4 @@
-"""``clothsim bench render --end-to-end``: frames per second of a whole clip, as ``clothsim render`` makes it.
+"""The end of ``clothsim bench render``: frames per second of a whole clip, as ``clothsim render`` makes it.
 
 Four figures, each the median over repeats, timed round-robin (one repeat of each in turn) so that
 a slow period of a shared machine hits them all alike:
@@ -72,10 +72,10 @@ def run_end_to_end(scene_name: str, size: tuple[int, int], samples: int, look: s
                 runs[name].append(fn())
         info = renderer.info()
         aa = f"{renderer.samples}x MSAA" if renderer.samples else "no MSAA"
-        print(f"bench render --end-to-end: {scene_name}, {look}, {size[0]}x{size[1]}, {aa}, "
+        print(f"end to end: {scene_name}, {look}, {size[0]}x{size[1]}, {aa}, "
               f"{info['renderer']} ({info['version']})")
-        print(f"{frames} frames simulated per clip, every {every}: {len(states)} drawn; {repeats} repeats "
-              "round-robin; medians of drawn frames per second (simulate + draw + read back, no encoding)")
+        print(f"a clip of {frames} frames from the start, every {every} drawn ({len(states)} images); {repeats} "
+              "repeats round-robin; medians of images per second (simulate + draw + read back, no encoding)")
         print(f"{'':<14}{'fps':>8}{'min':>8}{'max':>8}{'vs render only':>16}{'vs limit':>10}")
         only = statistics.median(runs["render only"])
         limit = statistics.median(runs["driver limit"])

@@ -87,9 +87,12 @@ def add_parsers(sub: argparse._SubParsersAction, bench_sub: argparse._SubParsers
     b = bench_sub.add_parser("render", help="frames per second per shader, and where a frame's time goes",
                              description="Render a scene with each shader and report frames per second of "
                                          "render + read-back, and the share of a frame (simulation included) "
-                                         "spent in simulation, mesh update, upload, draw and read-back. "
+                                         "spent in simulation, mesh update, upload, draw and read-back; then "
+                                         "a clip end to end with the first look (phong if listed): "
+                                         "--frames frames simulated and drawn, the simulation overlapped and "
+                                         "serial, against drawing alone and the driver's fill limit. "
                                          "Medians over repeats.")
-    b.add_argument("scene", nargs="?", help="scene (default: sphere; pinned2 with --end-to-end)")
+    b.add_argument("scene", nargs="?", default="sphere", help="scene (default: sphere)")
     b.add_argument("--size", default="800x800", metavar="WxH", help="image size (default 800x800)")
     b.add_argument("--samples", type=int, default=4, metavar="N", help="multisampling samples, 0 for none (default 4)")
     b.add_argument("--frames", type=int, default=60, metavar="N", help="timed frames per repeat (default 60)")
@@ -97,14 +100,6 @@ def add_parsers(sub: argparse._SubParsersAction, bench_sub: argparse._SubParsers
     b.add_argument("--warmup", type=int, default=60, metavar="N",
                    help="frames simulated before timing, so the cloth is draped, not flat (default 60)")
     b.add_argument("--shaders", default=",".join(SHADERS), metavar="LIST", help="comma-separated looks (default: all)")
-    b.add_argument("--end-to-end", action="store_true",
-                   help="time a whole clip as `clothsim render` makes it (simulate, draw, read back; the simulation "
-                        "in its thread and in the drawing thread), against drawing the same states alone and against "
-                        "the driver's limit (a constant-colour fragment shader); --shaders takes one look (default phong)")
-    b.add_argument("--every", type=int, default=1, metavar="K",
-                   help="--end-to-end: draw every K-th frame of the clip (default 1; `render` uses 3 for .gif/.mp4)")
-    b.add_argument("--clip-frames", type=int, default=90, metavar="N",
-                   help="--end-to-end: frames simulated per clip (default 90, as `clothsim render`)")
     b.set_defaults(func=run_bench_render)
 
 
@@ -301,21 +296,13 @@ def run_bench_render(args: argparse.Namespace) -> int:
             raise ClothsimError(f"--shaders: unknown shader {s!r} (expected some of: {', '.join(SHADERS)})")
     if args.frames < 1 or args.repeats < 1 or args.warmup < 0:
         raise ClothsimError("--frames and --repeats must be >= 1, --warmup >= 0")
-    if args.end_to_end:
-        from ..bench.endtoend import run_end_to_end
-
-        if args.every < 1 or args.clip_frames < 1:
-            raise ClothsimError("--every and --clip-frames must be >= 1")
-        look = shaders[0] if args.shaders != ",".join(SHADERS) and len(shaders) == 1 else "phong"
-        return run_end_to_end(args.scene or "pinned2", (width, height), args.samples, look,
-                              args.clip_frames, args.every, args.repeats, _renderer)
-    scene = load_scene(args.scene or "sphere")
+    scene = load_scene(args.scene)
     sim = Simulation(scene)
     renderer = _renderer((width, height), args.samples, size_label="--size", profile=True)
     try:
         info = renderer.info()
         aa = f"{renderer.samples}x MSAA" if renderer.samples else "no MSAA"
-        print(f"bench render: {args.scene or 'sphere'}, {width}x{height}, {aa}, "
+        print(f"bench render: {args.scene}, {width}x{height}, {aa}, "
               f"{info['renderer']} ({info['version']})")
         print(f"{args.frames} frames x {args.repeats} repeats per shader after {args.warmup} warm-up frames; "
               "medians; fps = render + read-back only; shares are of a whole frame incl. simulation")
@@ -345,4 +332,8 @@ def run_bench_render(args: argparse.Namespace) -> int:
                   f"{share['sim']:>7.0%}" + "".join(f"{share[s]:>9.0%}" for s in STAGES))
     finally:
         renderer.release()
-    return 0
+    from ..bench.endtoend import run_end_to_end
+
+    print()
+    return run_end_to_end(args.scene, (width, height), args.samples, "phong" if "phong" in shaders else shaders[0],
+                          args.frames, 1, args.repeats, _renderer)
