@@ -108,3 +108,17 @@ def test_missing_egl_gives_one_line(monkeypatch):
     assert "\n" not in message
     for package in ("libegl1", "libegl-mesa0", "libgl1-mesa-dri"):
         assert package in message
+
+
+def test_bench_render_ends_with_a_clip_end_to_end(egl_available):
+    r = clothsim("bench", "render", "pinned2", "--shaders", "normal,phong", "--frames", "4", "--repeats", "1",
+                 "--warmup", "0", "--size", "64x64")
+    assert r.returncode == 0, r.stderr
+    lines = r.stdout.splitlines()
+    assert [line.split()[0] for line in lines[3:5]] == ["normal", "phong"]
+    assert lines[5] == "" and lines[6].startswith("end to end: pinned2, phong, 64x64, ")
+    assert "a clip of 4 frames from the start, every 1 drawn (5 images)" in lines[7]
+    rows = {line[:14].strip(): line[14:].split() for line in lines[9:]}
+    assert set(rows) == {"overlapped", "serial", "render only", "driver limit"}
+    assert all(float(v[0]) > 0 for v in rows.values())  # images per second
+    assert rows["render only"][3] == "100%" and rows["driver limit"][4] == "100%"

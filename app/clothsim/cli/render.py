@@ -7,6 +7,7 @@ libEGL, so the GL side is imported inside the functions that draw.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import statistics
 import sys
 import time
@@ -86,7 +87,10 @@ def add_parsers(sub: argparse._SubParsersAction, bench_sub: argparse._SubParsers
     b = bench_sub.add_parser("render", help="frames per second per shader, and where a frame's time goes",
                              description="Render a scene with each shader and report frames per second of "
                                          "render + read-back, and the share of a frame (simulation included) "
-                                         "spent in simulation, mesh update, upload, draw and read-back. "
+                                         "spent in simulation, mesh update, upload, draw and read-back; then "
+                                         "a clip end to end with the first look (phong if listed): "
+                                         "--frames frames simulated and drawn, the simulation overlapped and "
+                                         "serial, against drawing alone and the driver's fill limit. "
                                          "Medians over repeats.")
     b.add_argument("scene", nargs="?", default="sphere", help="scene (default: sphere)")
     b.add_argument("--size", default="800x800", metavar="WxH", help="image size (default 800x800)")
@@ -186,6 +190,7 @@ def run_render(args: argparse.Namespace) -> int:
     settings = RenderSettings.from_scene(scene).with_overrides(cli_overrides(args), label=_flag_label)
     fps = args.video_fps if args.video_fps is not None else scene.simulation.frames_per_sec / every
 
+    from ..render.pipeline import ClipStats, clip_frames
     from ..sim.rest import RestDetector
     from ..sim.simulation import Simulation
 
@@ -194,52 +199,29 @@ def run_render(args: argparse.Namespace) -> int:
     rest = None if args.no_rest else RestDetector(scene.simulation.rest_tolerance, scene.simulation.rest_frames)
     if rest is not None:
         rest.update(sim._pos)
-    timing = {"simulate": 0.0, "render": 0.0}
-    counts = {"simulated": 0, "rendered": 0, "reused": 0}
-    rested_at: int | None = None
+    stats = ClipStats()
+    render_s = 0.0
+    counts = {"rendered": 0, "reused": 0}
     image = None
-
-    def advance() -> None:
-        # A cloth at rest is not simulated any further: its state (and so its image) stays put.
-        nonlocal rested_at
-        if rested_at is not None:
-            return
-        t0 = time.perf_counter()
-        sim.step(1)
-        timing["simulate"] += time.perf_counter() - t0
-        counts["simulated"] += 1
-        if rest is not None and rest.update(sim._pos) and sim.time >= sim.colliders_still_after:
-            rested_at = sim.frame
-
-    def draw() -> Any:
-        nonlocal image
-        if image is not None and draw.frozen:
-            counts["reused"] += 1
-            return image
-        t0 = time.perf_counter()
-        image = renderer.render(sim, settings=settings)
-        timing["render"] += time.perf_counter() - t0
-        counts["rendered"] += 1
-        draw.frozen = rested_at is not None
-        return image
-
-    draw.frozen = False
     try:
         with output.open_output(args.output, fps) as sink, _progress(args.frames, settings.shader) as bar:
-            if fmt == "png":
-                for _ in range(args.frames):
-                    advance()
-                    bar.update(1)
-                sink(draw())
-            else:
-                sink(draw())
-                for frame in range(1, args.frames + 1):
-                    advance()
-                    bar.update(1)
-                    if frame % every == 0:
-                        sink(draw())
+            stats.progress = bar.update
+            # The simulation runs a few drawn frames ahead in a thread while the driver draws.
+            with contextlib.closing(clip_frames(sim, args.frames, every, fmt == "png", rest, stats)) as states:
+                for state in states:
+                    if state is None:
+                        counts["reused"] += 1
+                    else:
+                        t0 = time.perf_counter()
+                        image = renderer.render(state, settings=settings)
+                        render_s += time.perf_counter() - t0
+                        counts["rendered"] += 1
+                    sink(image)
     finally:
         renderer.release()
+    rested_at = stats.rested_at
+    timing = {"simulate": stats.simulate_s, "render": render_s}
+    counts["simulated"] = stats.simulated
     if rested_at is not None:
         print(f"cloth at rest after frame {rested_at}; later frames reuse its image", file=sys.stderr)
     if args.profile:
@@ -350,4 +332,8 @@ def run_bench_render(args: argparse.Namespace) -> int:
                   f"{share['sim']:>7.0%}" + "".join(f"{share[s]:>9.0%}" for s in STAGES))
     finally:
         renderer.release()
-    return 0
+    from ..bench.endtoend import run_end_to_end
+
+    print()
+    return run_end_to_end(args.scene, (width, height), args.samples, "phong" if "phong" in shaders else shaders[0],
+                          args.frames, 1, args.repeats, _renderer)

@@ -26,6 +26,7 @@ from .context import create_context
 from .programs import Programs, set_matrix, set_uniform
 from .settings import (SHADERS, USES_COLOR_TEXTURE, USES_CUBEMAP, USES_HEIGHT_MAP, USES_TANGENTS,
                        RenderSettings, srgb_to_linear)
+from .waits import gl_calls
 
 if TYPE_CHECKING:
     from .channels import Channels
@@ -137,6 +138,9 @@ class Renderer:
         self._textures: dict[tuple[Any, ...], Any] = {}
         self._settings_for: tuple[Scene | None, RenderSettings | None] = (None, None)
         self._channels: Any = None  # the data pass's float targets (channels.py), made on first use
+        # glFinish and glReadPixels without the GIL, so that a simulation thread runs while the
+        # driver draws (see waits.py); None: moderngl's own calls.
+        self._gl = gl_calls()
         self.timings: dict[str, float] = dict.fromkeys(STAGES, 0.0)
 
     # -- public --------------------------------------------------------------------------------
@@ -165,7 +169,7 @@ class Renderer:
             t2 = time.perf_counter()
             self._draw(simulation, look, settings, buffers, camera)
             if self.profile:
-                self.ctx.finish()
+                self._finish()
             t3 = time.perf_counter()
             image = self._read()
             t4 = time.perf_counter()
@@ -439,6 +443,9 @@ class Renderer:
             set_uniform(prog, "u_color", (*dim, 1.0))
         self._draw_colliders(prog, look, sim, settings)
         ctx.wireframe = False
+        # The driver draws in the call that first needs the pixels; wait here, without the GIL,
+        # rather than inside moderngl's resolve.
+        self._finish()
         ctx.copy_framebuffer(self._fbo, self._ms_fbo)  # resolves the multisampled image
 
     def _draw_colliders(self, prog: Any, look: str, sim: ClothState, settings: RenderSettings,
@@ -592,9 +599,19 @@ class Renderer:
             self._cubemap(settings.cubemap).use(UNIT_CUBE)
             set_uniform(prog, "u_texture_cubemap", UNIT_CUBE)
 
+    def _finish(self) -> None:
+        if self._gl is not None:
+            self._gl.finish()
+        else:
+            self.ctx.finish()
+
     def _read(self) -> np.ndarray:
         image = np.empty((self.height, self.width, 3), dtype=np.uint8)
-        self._fbo.read_into(image, components=3, alignment=1)
+        if self._gl is not None:
+            self._gl.finish()  # the resolve, without the GIL
+            self._gl.read_rgb(self._fbo, image)
+        else:
+            self._fbo.read_into(image, components=3, alignment=1)
         return image
 
 
