@@ -3,7 +3,9 @@
 Each substep a mesh has a translation before and after it (its motion track at the substep's two
 ends); a point is handled in the mesh's own frame, where its last position ``l`` and its position
 ``q`` are taken relative to those two translations. Every candidate triangle (from the grid cells
-overlapping ``q +- r``, ``r`` = thickness + |q - l|) gives
+listing ``q``, or those overlapping ``q +- (r - margin)`` for a point that moved, ``r`` = thickness
++ |q - l|: :mod:`~clothsim.sim.passes.colliders.meshgrid`) whose bounding box comes within ``r``
+of ``q`` gives
 
 * the closest point on it to ``q`` (Ericson, Real-Time Collision Detection, 5.1.5), with the
   feature it lies on (face, edge or vertex) for the pseudo-normal;
@@ -35,7 +37,7 @@ from numba import njit
 
 from ....jit import CHUNKS, EXACT
 from .meshgrid import DIMS_CELL0, DIMS_CLOSED, DIMS_K0, DIMS_K1, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
-    INFO_HI, INFO_INV_H, INFO_LO
+    INFO_HI, INFO_INV_H, INFO_LO, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK
 from ...team import share
 from ...track import track_at as _position_at
 
@@ -43,7 +45,7 @@ from ...track import track_at as _position_at
 FACE, VERTEX_A, VERTEX_B, VERTEX_C, EDGE_AB, EDGE_BC, EDGE_CA = 0, 1, 2, 3, 4, 5, 6
 
 
-@njit(**EXACT)
+@njit(inline="always", **EXACT)
 def closest_on_triangle(px: float, py: float, pz: float, ax: float, ay: float, az: float, bx: float, by: float,
                         bz: float, cx: float, cy: float, cz: float) -> tuple[float, float, float, int]:
     """The point of triangle abc closest to p and the feature it lies on (Ericson 5.1.5)."""
@@ -82,7 +84,7 @@ def closest_on_triangle(px: float, py: float, pz: float, ax: float, ay: float, a
     return ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w, FACE
 
 
-@njit(**EXACT)
+@njit(inline="always", **EXACT)
 def segment_hits(lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, ax: float, ay: float,
                  az: float, bx: float, by: float, bz: float, cx: float, cy: float, cz: float) -> float:
     """Parameter s in [0, 1] where the segment l -> q meets triangle abc (Moller-Trumbore), or -1."""
@@ -158,7 +160,7 @@ def resolve(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy:
     return True, cx + nx * side, cy + ny * side, cz + nz * side
 
 
-@njit(**EXACT)
+@njit(inline="always", **EXACT)
 def tri_test(verts: np.ndarray, tris: np.ndarray, fnorm: np.ndarray, t: int, lx: float, ly: float, lz: float,
              qx: float, qy: float, qz: float, r: float) -> tuple[float, float, float, float, int, float]:
     """Triangle ``t`` against a point: (distance^2 from q, closest point, its feature, the
@@ -180,7 +182,7 @@ def tri_test(verts: np.ndarray, tris: np.ndarray, fnorm: np.ndarray, t: int, lx:
     return d2, px, py, pz, feature, segment_hits(lx, ly, lz, qx, qy, qz, ax, ay, az, bx, by, bz, cx, cy, cz)
 
 
-@njit(**EXACT)
+@njit(inline="always", **EXACT)
 def _far(tbox: np.ndarray, t: int, qx: float, qy: float, qz: float, r: float) -> bool:
     # A triangle whose bounding box is further than r from q in some axis can neither be within r
     # (too far) nor be crossed (the segment lies within |q - l| < r of q): passed over untested.
@@ -188,7 +190,7 @@ def _far(tbox: np.ndarray, t: int, qx: float, qy: float, qz: float, r: float) ->
             or qz + r < tbox[t, 2] or qz - r > tbox[t, 5])
 
 
-@njit(**EXACT)
+@njit(inline="always", **EXACT)
 def _fold(t: int, d2: float, px: float, py: float, pz: float, feature: int, s: float, r2: float, bd2: float,
           bpx: float, bpy: float, bpz: float, bt: int, bf: int, bs: float, bh: int
           ) -> tuple[float, float, float, float, int, int, float, int]:
@@ -202,18 +204,70 @@ def _fold(t: int, d2: float, px: float, py: float, pz: float, feature: int, s: f
     return bd2, bpx, bpy, bpz, bt, bf, bs, bh
 
 
-@njit(**EXACT)
+@njit(inline="always", **EXACT)
 def _cell(x: float, lo: float, inv_h: float, n: int) -> int:
     c = int(math.floor((x - lo) * inv_h))
     return 0 if c < 0 else (n - 1 if c > n - 1 else c)
 
 
 @njit(inline="always", **EXACT)
-def point_contact(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float,
+def _grid_range(mesh: tuple, m: int, qx: float, qy: float, qz: float, reach: float
+                ) -> tuple[int, int, int, int, int, int]:
+    """The cells (x0, x1, y0, y1, z0, z1) that list every triangle whose box comes within
+    ``reach`` of q: the triangles are listed with their boxes grown by the margin, so only a reach
+    beyond the margin looks past q's own cell."""
+    info = mesh.info
+    dims = mesh.dims
+    e = reach - info[m, INFO_MARGIN]
+    e = e if e > 0.0 else 0.0
+    inv_h = info[m, INFO_INV_H]
+    nx, ny, nz = dims[m, DIMS_N], dims[m, DIMS_N + 1], dims[m, DIMS_N + 2]
+    return (_cell(qx - e, info[m, INFO_LO], inv_h, nx), _cell(qx + e, info[m, INFO_LO], inv_h, nx),
+            _cell(qy - e, info[m, INFO_LO + 1], inv_h, ny), _cell(qy + e, info[m, INFO_LO + 1], inv_h, ny),
+            _cell(qz - e, info[m, INFO_LO + 2], inv_h, nz), _cell(qz + e, info[m, INFO_LO + 2], inv_h, nz))
+
+
+@njit(**EXACT)
+def gather_near(mesh: tuple, m: int, p: int, qx: float, qy: float, qz: float) -> int:
+    """Point ``p``'s list of mesh ``m``: every triangle whose box comes within the list's reach
+    (``INFO_NEAR``) of q, each once, into ``near_tris[m, p]``; returns their number, or -1 when
+    there are more than a list holds (the point then asks the grid every substep)."""
+    reach = mesh.info[m, INFO_NEAR]
+    x0, x1, y0, y1, z0, z1 = _grid_range(mesh, m, qx, qy, qz, reach)
+    nx, ny = mesh.dims[m, DIMS_N], mesh.dims[m, DIMS_N + 1]
+    base = mesh.dims[m, DIMS_CELL0]
+    cell_start = mesh.cell_start
+    cell_tris = mesh.cell_tris
+    cell_box = mesh.cell_box
+    near = mesh.near_tris
+    room = near.shape[2]
+    count = 0
+    for cz in range(z0, z1 + 1):
+        for cy in range(y0, y1 + 1):
+            for cx in range(x0, x1 + 1):
+                cell = base + (cz * ny + cy) * nx + cx
+                for k in range(cell_start[cell], cell_start[cell + 1]):
+                    if not _far(cell_box, k, qx, qy, qz, reach):
+                        t = cell_tris[k]
+                        seen = False
+                        for j in range(count):  # a triangle may be listed in several of the cells
+                            if near[m, p, j] == t:
+                                seen = True
+                                break
+                        if not seen:
+                            if count == room:
+                                return -1
+                            near[m, p, count] = t
+                            count += 1
+    return count
+
+
+@njit(inline="always", **EXACT)
+def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float,
                   brute: bool) -> tuple[bool, float, float, float]:
-    """Collide one point (mesh frame: last ``l``, now ``q``) with mesh ``m``: (contact?, the
-    corrected position before friction). ``brute`` tests every triangle instead of the grid's
-    (same answer)."""
+    """Collide point ``p`` (mesh frame: last ``l``, now ``q``) with mesh ``m``: (contact?, the
+    corrected position before friction). ``brute`` tests every triangle instead of the point's
+    list or the grid's cells (same answer)."""
     info = mesh.info
     dims = mesh.dims
     r = mesh.thickness + math.sqrt((qx - lx) ** 2 + (qy - ly) ** 2 + (qz - lz) ** 2)
@@ -232,28 +286,48 @@ def point_contact(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: floa
                 d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
                 bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy, bpz, bt,
                                                            bf, bs, bh)
-    else:
-        inv_h = info[m, INFO_INV_H]
-        nx, ny, nz = dims[m, DIMS_N], dims[m, DIMS_N + 1], dims[m, DIMS_N + 2]
-        x0 = _cell(qx - r, info[m, INFO_LO], inv_h, nx)
-        x1 = _cell(qx + r, info[m, INFO_LO], inv_h, nx)
-        y0 = _cell(qy - r, info[m, INFO_LO + 1], inv_h, ny)
-        y1 = _cell(qy + r, info[m, INFO_LO + 1], inv_h, ny)
-        z0 = _cell(qz - r, info[m, INFO_LO + 2], inv_h, nz)
-        z1 = _cell(qz + r, info[m, INFO_LO + 2], inv_h, nz)
-        base = dims[m, DIMS_CELL0]
-        cell_start = mesh.cell_start
-        cell_tris = mesh.cell_tris
-        for cz in range(z0, z1 + 1):
-            for cy in range(y0, y1 + 1):
-                for cx in range(x0, x1 + 1):
-                    cell = base + (cz * ny + cy) * nx + cx
-                    for e in range(cell_start[cell], cell_start[cell + 1]):
-                        t = cell_tris[e]
-                        if not _far(tbox, t, qx, qy, qz, r):
-                            d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
-                            bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy,
-                                                                       bpz, bt, bf, bs, bh)
+        return resolve(mesh, m, lx, ly, lz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
+    # The point's own list (see the module's docstring) holds every triangle within the list's
+    # reach of its anchor, so it holds every one within r of q while q has moved less than
+    # reach - r (per axis) from the anchor; else it is gathered afresh at q, if r leaves room.
+    count = -1
+    near_n = mesh.near_n
+    if p < near_n.shape[1]:
+        limit = info[m, INFO_NEAR_OK]
+        if r <= limit:
+            at = mesh.near_at
+            d = max(abs(qx - at[m, p, 0]), abs(qy - at[m, p, 1]), abs(qz - at[m, p, 2]))
+            count = near_n[m, p]
+            if not d + r <= limit:
+                count = gather_near(mesh, m, p, qx, qy, qz)
+                near_n[m, p] = count
+                at[m, p, 0], at[m, p, 1], at[m, p, 2] = qx, qy, qz
+    if count >= 0:
+        near = mesh.near_tris
+        for j in range(count):
+            t = np.int64(near[m, p, j])
+            if not _far(tbox, t, qx, qy, qz, r):
+                d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
+                bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy, bpz, bt,
+                                                           bf, bs, bh)
+        return resolve(mesh, m, lx, ly, lz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
+    x0, x1, y0, y1, z0, z1 = _grid_range(mesh, m, qx, qy, qz, r)
+    nx, ny = dims[m, DIMS_N], dims[m, DIMS_N + 1]
+    base = dims[m, DIMS_CELL0]
+    cell_start = mesh.cell_start
+    cell_tris = mesh.cell_tris
+    cell_box = mesh.cell_box
+    for cz in range(z0, z1 + 1):
+        for cy in range(y0, y1 + 1):
+            for cx in range(x0, x1 + 1):
+                cell = base + (cz * ny + cy) * nx + cx
+                # the boxes in a row, read in order; the triangle's own data only for the near ones
+                for k in range(cell_start[cell], cell_start[cell + 1]):
+                    if not _far(cell_box, k, qx, qy, qz, r):
+                        t = cell_tris[k]
+                        d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
+                        bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy,
+                                                                   bpz, bt, bf, bs, bh)
     return resolve(mesh, m, lx, ly, lz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
 
 
@@ -284,7 +358,7 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
     for k in range(free.shape[0]):
         p = free[k]
         lx, ly, lz = last[0, p] - bx, last[1, p] - by, last[2, p] - bz
-        hit, ox, oy, oz = point_contact(mesh, m, lx, ly, lz, pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az, brute)
+        hit, ox, oy, oz = point_contact(mesh, m, p, lx, ly, lz, pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az, brute)
         if hit:
             pos[0, p] = ax + lx + (ox - lx) * keep
             pos[1, p] = ay + ly + (oy - ly) * keep
