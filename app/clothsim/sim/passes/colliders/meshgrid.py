@@ -42,7 +42,7 @@ LISTING_SLACK = 1e-9
 #: point keeps its list, the more triangles in it.
 NEAR_REACH = 1.5
 #: Most triangles a point's list holds (more: that point asks the grid, every substep).
-NEAR_ROOM = 32
+NEAR_ROOM = 64
 
 
 class MeshGroup(NamedTuple):
