@@ -2,10 +2,8 @@
 
 Each substep a mesh has a translation before and after it (its motion track at the substep's two
 ends); a point is handled in the mesh's own frame, where its last position ``l`` and its position
-``q`` are taken relative to those two translations. Every candidate triangle (from the grid cells
-listing ``q``, or those overlapping ``q +- (r - margin)`` for a point that moved, ``r`` = thickness
-+ |q - l|: :mod:`~clothsim.sim.passes.colliders.meshgrid`) whose bounding box comes within ``r``
-of ``q`` gives
+``q`` are taken relative to those two translations. Every triangle whose bounding box comes
+within ``r`` = thickness + |q - l| of ``q`` gives
 
 * the closest point on it to ``q`` (Ericson, Real-Time Collision Detection, 5.1.5), with the
   feature it lies on (face, edge or vertex) for the pseudo-normal;
@@ -24,8 +22,20 @@ The point is then corrected, in this order:
 
 Friction as for spheres: the point moves from its last position towards the corrected one by
 (1 - friction), relative to the mesh, so a mesh of friction 1 carries the points it holds.
-Ties between triangles are broken by the lower triangle index, so the grid's answer does not
-depend on the order it visits cells, and equals the brute-force one (:func:`mesh_targets`).
+
+Which triangles a point tests (the broad phase): each point keeps, per mesh, a list of the
+triangles whose boxes come within the list's reach (1.5 thicknesses, ``INFO_NEAR``) of an anchor,
+the point's position when the list was gathered. While the point stays within reach - r of its
+anchor (per axis, less a slack far beyond rounding: ``INFO_NEAR_OK``), the list holds every
+triangle within r of it; a cloth at rest on a mesh keeps its lists for many substeps, and each
+substep reads a few triangles in a row. A point that left its reach gathers its list afresh from
+the grid (:mod:`~clothsim.sim.passes.colliders.meshgrid`); one whose r exceeds the reach (a fast
+point), or whose list would hold more than ``NEAR_ROOM`` triangles, asks the grid for this
+substep's. The lists are a cache of where each point is, not of its history: whichever way a
+point's triangles were found, they include every one within r of it. Ties between triangles are
+broken by the lower triangle index, so the answer does not depend on the order triangles come in,
+and equals the brute-force one (:func:`mesh_targets`) bit for bit. Each point's list is written
+only by the work item that owns the point.
 """
 
 from __future__ import annotations
