@@ -55,7 +55,7 @@ from ...track import track_at as _position_at
 FACE, VERTEX_A, VERTEX_B, VERTEX_C, EDGE_AB, EDGE_BC, EDGE_CA = 0, 1, 2, 3, 4, 5, 6
 
 
-@njit(inline="always", **EXACT)
+@njit(**EXACT)
 def closest_on_triangle(px: float, py: float, pz: float, ax: float, ay: float, az: float, bx: float, by: float,
                         bz: float, cx: float, cy: float, cz: float) -> tuple[float, float, float, int]:
     """The point of triangle abc closest to p and the feature it lies on (Ericson 5.1.5)."""
@@ -94,7 +94,7 @@ def closest_on_triangle(px: float, py: float, pz: float, ax: float, ay: float, a
     return ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w, FACE
 
 
-@njit(inline="always", **EXACT)
+@njit(**EXACT)
 def segment_hits(lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, ax: float, ay: float,
                  az: float, bx: float, by: float, bz: float, cx: float, cy: float, cz: float) -> float:
     """Parameter s in [0, 1] where the segment l -> q meets triangle abc (Moller-Trumbore), or -1."""
@@ -272,6 +272,22 @@ def gather_near(mesh: tuple, m: int, p: int, qx: float, qy: float, qz: float) ->
     return count
 
 
+@njit(**EXACT)
+def _brute_fold(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, r: float
+                ) -> tuple[float, float, float, float, int, int, float, int]:
+    """The fold (:func:`_fold`) over every triangle of mesh ``m``: the reference the tests hold the
+    lists and the grid to (compiled apart, so the pass does not carry a third copy of the tests)."""
+    tbox = mesh.tbox
+    r2 = r * r
+    bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
+    for t in range(mesh.dims[m, DIMS_TRI0], mesh.dims[m, DIMS_TRI1]):
+        if not _far(tbox, t, qx, qy, qz, r):
+            d2, px, py, pz, f, s = tri_test(mesh.verts, mesh.tris, mesh.fnorm, t, lx, ly, lz, qx, qy, qz, r)
+            bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy, bpz, bt, bf,
+                                                       bs, bh)
+    return bd2, bpx, bpy, bpz, bt, bf, bs, bh
+
+
 @njit(inline="always", **EXACT)
 def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float,
                   brute: bool) -> tuple[bool, float, float, float]:
@@ -291,11 +307,7 @@ def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, 
     r2 = r * r
     bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
     if brute:
-        for t in range(dims[m, DIMS_TRI0], dims[m, DIMS_TRI1]):
-            if not _far(tbox, t, qx, qy, qz, r):
-                d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
-                bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy, bpz, bt,
-                                                           bf, bs, bh)
+        bd2, bpx, bpy, bpz, bt, bf, bs, bh = _brute_fold(mesh, m, lx, ly, lz, qx, qy, qz, r)
         return resolve(mesh, m, lx, ly, lz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
     # The point's own list (see the module's docstring) holds every triangle within the list's
     # reach of its anchor, so it holds every one within r of q while q has moved less than
