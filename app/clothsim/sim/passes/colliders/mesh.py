@@ -288,6 +288,35 @@ def _brute_fold(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float,
     return bd2, bpx, bpy, bpz, bt, bf, bs, bh
 
 
+@njit(**EXACT)
+def _grid_fold(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, r: float
+               ) -> tuple[float, float, float, float, int, int, float, int]:
+    """The fold (:func:`_fold`) over the triangles the grid lists near q: for a point without a
+    list (one that moves fast, or has too many triangles near it; compiled apart, as it is rare)."""
+    x0, x1, y0, y1, z0, z1 = _grid_range(mesh, m, qx, qy, qz, r)
+    dims = mesh.dims
+    nx, ny = dims[m, DIMS_N], dims[m, DIMS_N + 1]
+    base = dims[m, DIMS_CELL0]
+    cell_start = mesh.cell_start
+    cell_tris = mesh.cell_tris
+    cell_box = mesh.cell_box
+    r2 = r * r
+    bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
+    for cz in range(z0, z1 + 1):
+        for cy in range(y0, y1 + 1):
+            for cx in range(x0, x1 + 1):
+                cell = base + (cz * ny + cy) * nx + cx
+                # the boxes in a row, read in order; the triangle's own data only for the near ones
+                for k in range(cell_start[cell], cell_start[cell + 1]):
+                    if not _far(cell_box, k, qx, qy, qz, r):
+                        t = cell_tris[k]
+                        d2, px, py, pz, f, s = tri_test(mesh.verts, mesh.tris, mesh.fnorm, t, lx, ly, lz, qx, qy,
+                                                        qz, r)
+                        bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy,
+                                                                   bpz, bt, bf, bs, bh)
+    return bd2, bpx, bpy, bpz, bt, bf, bs, bh
+
+
 @njit(inline="always", **EXACT)
 def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float,
                   brute: bool) -> tuple[bool, float, float, float]:
@@ -295,26 +324,16 @@ def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, 
     corrected position before friction). ``brute`` tests every triangle instead of the point's
     list or the grid's cells (same answer)."""
     info = mesh.info
-    dims = mesh.dims
     r = mesh.thickness + math.sqrt((qx - lx) ** 2 + (qy - ly) ** 2 + (qz - lz) ** 2)
     if (qx + r < info[m, INFO_LO] or qx - r > info[m, INFO_HI] or qy + r < info[m, INFO_LO + 1]
             or qy - r > info[m, INFO_HI + 1] or qz + r < info[m, INFO_LO + 2] or qz - r > info[m, INFO_HI + 2]):
         return False, qx, qy, qz
-    verts = mesh.verts
-    tris = mesh.tris
-    tbox = mesh.tbox
-    fnorm = mesh.fnorm
-    r2 = r * r
-    bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
-    if brute:
-        bd2, bpx, bpy, bpz, bt, bf, bs, bh = _brute_fold(mesh, m, lx, ly, lz, qx, qy, qz, r)
-        return resolve(mesh, m, lx, ly, lz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
     # The point's own list (see the module's docstring) holds every triangle within the list's
     # reach of its anchor, so it holds every one within r of q while q has moved less than
     # reach - r (per axis) from the anchor; else it is gathered afresh at q, if r leaves room.
     count = -1
     near_n = mesh.near_n
-    if p < near_n.shape[1]:
+    if p < near_n.shape[1] and not brute:
         limit = info[m, INFO_NEAR_OK]
         if r <= limit:
             at = mesh.near_at
@@ -325,31 +344,20 @@ def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, 
                 near_n[m, p] = count
                 at[m, p, 0], at[m, p, 1], at[m, p, 2] = qx, qy, qz
     if count >= 0:
+        tbox = mesh.tbox
         near = mesh.near_tris
+        r2 = r * r
+        bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
         for j in range(count):
             t = np.int64(near[m, p, j])
             if not _far(tbox, t, qx, qy, qz, r):
-                d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
+                d2, px, py, pz, f, s = tri_test(mesh.verts, mesh.tris, mesh.fnorm, t, lx, ly, lz, qx, qy, qz, r)
                 bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy, bpz, bt,
                                                            bf, bs, bh)
-        return resolve(mesh, m, lx, ly, lz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
-    x0, x1, y0, y1, z0, z1 = _grid_range(mesh, m, qx, qy, qz, r)
-    nx, ny = dims[m, DIMS_N], dims[m, DIMS_N + 1]
-    base = dims[m, DIMS_CELL0]
-    cell_start = mesh.cell_start
-    cell_tris = mesh.cell_tris
-    cell_box = mesh.cell_box
-    for cz in range(z0, z1 + 1):
-        for cy in range(y0, y1 + 1):
-            for cx in range(x0, x1 + 1):
-                cell = base + (cz * ny + cy) * nx + cx
-                # the boxes in a row, read in order; the triangle's own data only for the near ones
-                for k in range(cell_start[cell], cell_start[cell + 1]):
-                    if not _far(cell_box, k, qx, qy, qz, r):
-                        t = cell_tris[k]
-                        d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
-                        bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy,
-                                                                   bpz, bt, bf, bs, bh)
+    elif brute:
+        bd2, bpx, bpy, bpz, bt, bf, bs, bh = _brute_fold(mesh, m, lx, ly, lz, qx, qy, qz, r)
+    else:
+        bd2, bpx, bpy, bpz, bt, bf, bs, bh = _grid_fold(mesh, m, lx, ly, lz, qx, qy, qz, r)
     return resolve(mesh, m, lx, ly, lz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
 
 
