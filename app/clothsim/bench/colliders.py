@@ -4,10 +4,10 @@ Each bundled collider scene (``capsule``, ``tablecloth``, ``curtain``, ``mesh``)
 without its collider's motion, with the collider moved far out of the cloth's reach, and with the
 collider removed; self-collision off so that the rows differ by the collider pass alone. ``mesh``
 is timed a second time with its torus replaced by a finely tessellated one generated here
-(``mesh 20k``: 100 x 100 quads, 20,000 triangles, the same size). Then the cost of the mesh pass
-per cloth point: the ``mesh`` scene at several cloth sizes (thickness scaled with the point spacing,
-as ``clothsim bench scaling`` does), with and without its mesh; the difference per point and
-substep. The variants of a scene are timed round-robin (one repeat of each in turn), so a slow
+(``mesh 20k``: 100 x 100 quads, 20,000 triangles, the same size). With ``mesh`` among the
+scenes, then the cost of the mesh pass per cloth point: the ``mesh`` scene at 50 x 50, 100 x 100
+and 200 x 200 (thickness scaled with the point spacing, as ``clothsim bench scaling`` does), with
+and without its mesh; the difference per point and substep. The variants of a scene are timed round-robin (one repeat of each in turn), so a slow
 period of a shared machine hits them all alike.
 """
 
@@ -30,7 +30,7 @@ from ..validate import check, integer
 SCENES = ("capsule", "tablecloth", "curtain", "mesh", "mesh 20k")
 #: The generated torus of ``mesh 20k``: the bundled one's radii, 100 x 100 quads.
 FINE_TORUS = (TORUS[0], TORUS[1], 100, 100)
-#: Cloth sizes (points per side) of the per-point table.
+#: Cloth sizes (points per side) of the per-point table (with ``mesh`` among the scenes).
 SIZES = (50, 100, 200)
 #: How far a "far" collider is moved: well beyond any bundled cloth.
 FAR = 100.0
@@ -89,9 +89,6 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--warmup", type=int, default=60, help="frames simulated before timing (default 60)")
     p.add_argument("--scenes", nargs="*", default=list(SCENES),
                    help=f"scenes (default: {' '.join(repr(x) for x in SCENES)}; 'mesh 20k' is generated)")
-    p.add_argument("--sizes", type=int, nargs="*", default=list(SIZES),
-                   help=f"cloth sizes of the mesh pass's per-point table (default {' '.join(map(str, SIZES))}; "
-                        "none: no table)")
     p.set_defaults(func=run)
 
 
@@ -120,8 +117,6 @@ def run(args: argparse.Namespace) -> int:
     for flag, value, low in (("--frames", args.frames, 1), ("--repeats", args.repeats, 1),
                              ("--warmup", args.warmup, 0)):
         check(integer(ge=low), value, flag)
-    for n in args.sizes:
-        check(integer(ge=2), n, "--sizes")
     scenes = [_load(name) for name in args.scenes]
     print(f"{'scene':<14}{'colliders':<12}{'ms/frame':>10}{'vs none':>9}{'skipped':>10}")
     for name, scene in zip(args.scenes, scenes):
@@ -135,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"{name:<14}{label:<12}{ms[label]:>10.3f}{ms[label] / ms['none']:>8.2f}x{skipped:>10}", flush=True)
     print("self-collision off; medians of repeats taken round-robin; skipped = collider tests ruled out by the "
           "bounding box")
-    if args.sizes:
+    if "mesh" in args.scenes:
         _per_point(Simulation, load_scene("mesh").with_simulation(self_collision="off"), args)
     return 0
 
@@ -145,7 +140,7 @@ def _per_point(simulation: Callable[[Scene], Any], base: Scene, args: argparse.N
     print()
     print(f"{'points':>9}{'ms/frame':>10}{'-mesh':>9}{'ratio':>8}{'mesh ns/point/substep':>23}{'vs first':>10}")
     first = None
-    for n in args.sizes:
+    for n in SIZES:
         thickness = base.cloth.thickness * (base.cloth.num_width_points - 1) / (n - 1)
         scene = base.with_cloth(num_width_points=n, num_height_points=n, thickness=thickness)
         sims = {"as is": simulation(scene), "none": simulation(dataclasses.replace(scene, meshes=()))}
