@@ -151,6 +151,49 @@ def test_grid_gives_the_same_contacts_as_brute_force(tmp_path):
         assert moved > 500, moved  # the points met the mesh: the comparison is not vacuous
 
 
+def _near_surface(group, rng, n: int, spread: float) -> np.ndarray:
+    """(3, n) points within ``spread`` of the mesh's surface, at random corners of its triangles."""
+    t = rng.integers(0, group.tris.shape[0], n)
+    w = rng.dirichlet((1.0, 1.0, 1.0), n)
+    p = np.einsum("nk,nkc->nc", w, group.verts[group.tris[t]])
+    p += group.fnorm[t] * rng.uniform(-spread, spread, (n, 1)) + group.pose[0, :3]
+    return np.ascontiguousarray(p.T)
+
+
+@pytest.mark.parametrize("thickness, crowded", [(THICKNESS, False), (0.03, True)])
+def test_each_points_list_gives_the_brute_force_contacts_as_the_points_move(tmp_path, thickness, crowded):
+    # A finely tessellated torus (20,000 triangles) and a cloth of as many points as the test moves,
+    # so that each keeps its own list. The points take small steps (most lists are kept), larger
+    # ones (gathered afresh) and steps wider than a list reaches (the grid); with a thick cloth
+    # many points have more triangles near them than a list holds, and ask the grid every time.
+    n = 900
+    text = _scene(tmp_path, torus_obj(TORUS[0], TORUS[1], 100, 100),
+                  {"path": "shape.obj", "friction": 0.3, "translate": [0.5, 0.3, 0.5], "rotation": [10, 0, 25]},
+                  cloth=_cloth(30, thickness=thickness))
+    group = mesh_group(load_scene(text))
+    assert group.tris.shape[0] == 20000 and group.near_n.shape == (1, n)
+    rng = np.random.default_rng(3)
+    last = _near_surface(group, rng, n, 2.0 * thickness)
+    moved = 0
+    for step, spread in enumerate((0.2, 0.01, 0.01, 0.3, 0.01, 3.0, 0.01)):
+        pos = last + rng.normal(0.0, spread * thickness, last.shape)
+        anchors = group.near_at.copy()
+        grid = mesh_targets(pos, last, group, False)
+        brute = mesh_targets(pos, last, group, True)
+        assert grid.tobytes() == brute.tobytes(), step
+        moved += int(np.any(grid != pos, axis=0).sum())
+        if step == 2:  # after two small steps most lists were kept
+            assert np.all(group.near_at == anchors, axis=2).sum() > n // 2
+        last = grid
+    assert moved > n  # the points met the mesh: the comparison is not vacuous
+    listed = group.near_n[0] >= 0
+    too_many = np.isfinite(group.near_at[0, :, 0]) & ~listed  # gathered, and more than a list holds
+    if crowded:
+        assert too_many.sum() > n // 4
+    else:
+        assert listed.sum() > n // 2
+
+
 def test_a_point_that_jumps_through_a_sheet_in_one_substep_is_put_back_on_its_side(tmp_path):
     # 10 cm in one substep, ten times the thickness: only the swept (crossing) test can see it
     sheet = "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 2 3 4\n"
@@ -356,3 +399,16 @@ def test_a_box_and_an_obj_of_that_box_give_nearly_the_same_drape(tmp_path):
     assert np.linalg.norm(box.mean(axis=0) - mesh.mean(axis=0)) < 0.04
     assert abs(resting[0] - resting[1]) < 0.06 and min(resting) > 0.15, resting
     assert np.median(np.linalg.norm(box - mesh, axis=1)) < 0.06
+
+
+def test_the_collider_bench_times_the_mesh_scene_without_its_mesh_and_with_a_fine_torus():
+    from clothsim.bench.colliders import FAR, fine_mesh, variants
+
+    scene = load_scene("mesh")
+    v = variants(scene)
+    assert set(v) == {"as is", "far away", "none"}
+    assert v["none"].meshes == () and v["none"].planes == scene.planes
+    assert v["far away"].meshes[0].translate == (scene.meshes[0].translate[0] + FAR, *scene.meshes[0].translate[1:])
+    fine = fine_mesh(scene).meshes[0]
+    assert fine.closed and fine.triangles.shape == (20000, 3) and fine.translate == scene.meshes[0].translate
+    assert np.ptp(fine.vertices, axis=0) == pytest.approx(np.ptp(scene.meshes[0].vertices, axis=0), rel=0.01)

@@ -2,8 +2,8 @@
 
 Each substep a mesh has a translation before and after it (its motion track at the substep's two
 ends); a point is handled in the mesh's own frame, where its last position ``l`` and its position
-``q`` are taken relative to those two translations. Every candidate triangle (from the grid cells
-overlapping ``q +- r``, ``r`` = thickness + |q - l|) gives
+``q`` are taken relative to those two translations. Every triangle whose bounding box comes
+within ``r`` = thickness + |q - l| of ``q`` gives
 
 * the closest point on it to ``q`` (Ericson, Real-Time Collision Detection, 5.1.5), with the
   feature it lies on (face, edge or vertex) for the pseudo-normal;
@@ -22,8 +22,20 @@ The point is then corrected, in this order:
 
 Friction as for spheres: the point moves from its last position towards the corrected one by
 (1 - friction), relative to the mesh, so a mesh of friction 1 carries the points it holds.
-Ties between triangles are broken by the lower triangle index, so the grid's answer does not
-depend on the order it visits cells, and equals the brute-force one (:func:`mesh_targets`).
+
+Which triangles a point tests (the broad phase): each point keeps, per mesh, a list of the
+triangles whose boxes come within the list's reach (1.5 thicknesses, ``INFO_NEAR``) of an anchor,
+the point's position when the list was gathered. While the point stays within reach - r of its
+anchor (per axis, less a slack far beyond rounding: ``INFO_NEAR_OK``), the list holds every
+triangle within r of it; a cloth at rest on a mesh keeps its lists for many substeps, and each
+substep reads a few triangles in a row. A point that left its reach gathers its list afresh from
+the grid (:mod:`~clothsim.sim.passes.colliders.meshgrid`); one whose r exceeds the reach (a fast
+point), or whose list would hold more than ``NEAR_ROOM`` triangles, asks the grid for this
+substep's. The lists are a cache of where each point is, not of its history: whichever way a
+point's triangles were found, they include every one within r of it. Ties between triangles are
+broken by the lower triangle index, so the answer does not depend on the order triangles come in,
+and equals the brute-force one (:func:`mesh_targets`) bit for bit. Each point's list is written
+only by the work item that owns the point.
 """
 
 from __future__ import annotations
@@ -35,7 +47,7 @@ from numba import njit
 
 from ....jit import CHUNKS, EXACT
 from .meshgrid import DIMS_CELL0, DIMS_CLOSED, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
-    INFO_HI, INFO_INV_H, INFO_LO
+    INFO_HI, INFO_INV_H, INFO_LO, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK
 from ...team import share
 
 # closest-point features
@@ -157,7 +169,7 @@ def resolve(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy:
     return True, cx + nx * side, cy + ny * side, cz + nz * side
 
 
-@njit(**EXACT)
+@njit(inline="always", **EXACT)
 def tri_test(verts: np.ndarray, tris: np.ndarray, fnorm: np.ndarray, t: int, lx: float, ly: float, lz: float,
              qx: float, qy: float, qz: float, r: float) -> tuple[float, float, float, float, int, float]:
     """Triangle ``t`` against a point: (distance^2 from q, closest point, its feature, the
@@ -179,7 +191,7 @@ def tri_test(verts: np.ndarray, tris: np.ndarray, fnorm: np.ndarray, t: int, lx:
     return d2, px, py, pz, feature, segment_hits(lx, ly, lz, qx, qy, qz, ax, ay, az, bx, by, bz, cx, cy, cz)
 
 
-@njit(**EXACT)
+@njit(inline="always", **EXACT)
 def _far(tbox: np.ndarray, t: int, qx: float, qy: float, qz: float, r: float) -> bool:
     # A triangle whose bounding box is further than r from q in some axis can neither be within r
     # (too far) nor be crossed (the segment lies within |q - l| < r of q): passed over untested.
@@ -187,7 +199,7 @@ def _far(tbox: np.ndarray, t: int, qx: float, qy: float, qz: float, r: float) ->
             or qz + r < tbox[t, 2] or qz - r > tbox[t, 5])
 
 
-@njit(**EXACT)
+@njit(inline="always", **EXACT)
 def _fold(t: int, d2: float, px: float, py: float, pz: float, feature: int, s: float, r2: float, bd2: float,
           bpx: float, bpy: float, bpz: float, bt: int, bf: int, bs: float, bh: int
           ) -> tuple[float, float, float, float, int, int, float, int]:
@@ -201,58 +213,150 @@ def _fold(t: int, d2: float, px: float, py: float, pz: float, feature: int, s: f
     return bd2, bpx, bpy, bpz, bt, bf, bs, bh
 
 
-@njit(**EXACT)
+@njit(inline="always", **EXACT)
 def _cell(x: float, lo: float, inv_h: float, n: int) -> int:
     c = int(math.floor((x - lo) * inv_h))
     return 0 if c < 0 else (n - 1 if c > n - 1 else c)
 
 
 @njit(inline="always", **EXACT)
-def point_contact(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float,
-                  brute: bool) -> tuple[bool, float, float, float]:
-    """Collide one point (mesh frame: last ``l``, now ``q``) with mesh ``m``: (contact?, the
-    corrected position before friction). ``brute`` tests every triangle instead of the grid's
-    (same answer)."""
+def _grid_range(mesh: tuple, m: int, qx: float, qy: float, qz: float, reach: float
+                ) -> tuple[int, int, int, int, int, int]:
+    """The cells (x0, x1, y0, y1, z0, z1) that list every triangle whose box comes within
+    ``reach`` of q: the triangles are listed with their boxes grown by the margin, so only a reach
+    beyond the margin looks past q's own cell."""
     info = mesh.info
     dims = mesh.dims
+    e = reach - info[m, INFO_MARGIN]
+    e = e if e > 0.0 else 0.0
+    inv_h = info[m, INFO_INV_H]
+    nx, ny, nz = dims[m, DIMS_N], dims[m, DIMS_N + 1], dims[m, DIMS_N + 2]
+    return (_cell(qx - e, info[m, INFO_LO], inv_h, nx), _cell(qx + e, info[m, INFO_LO], inv_h, nx),
+            _cell(qy - e, info[m, INFO_LO + 1], inv_h, ny), _cell(qy + e, info[m, INFO_LO + 1], inv_h, ny),
+            _cell(qz - e, info[m, INFO_LO + 2], inv_h, nz), _cell(qz + e, info[m, INFO_LO + 2], inv_h, nz))
+
+
+@njit(**EXACT)
+def gather_near(mesh: tuple, m: int, p: int, qx: float, qy: float, qz: float) -> int:
+    """Point ``p``'s list of mesh ``m``: every triangle whose box comes within the list's reach
+    (``INFO_NEAR``) of q, each once, into ``near_tris[m, p]``; returns their number, or -1 when
+    there are more than a list holds (the point then asks the grid every substep)."""
+    reach = mesh.info[m, INFO_NEAR]
+    x0, x1, y0, y1, z0, z1 = _grid_range(mesh, m, qx, qy, qz, reach)
+    nx, ny = mesh.dims[m, DIMS_N], mesh.dims[m, DIMS_N + 1]
+    base = mesh.dims[m, DIMS_CELL0]
+    cell_start = mesh.cell_start
+    cell_tris = mesh.cell_tris
+    cell_box = mesh.cell_box
+    near = mesh.near_tris
+    room = near.shape[2]
+    count = 0
+    for cz in range(z0, z1 + 1):
+        for cy in range(y0, y1 + 1):
+            for cx in range(x0, x1 + 1):
+                cell = base + (cz * ny + cy) * nx + cx
+                for k in range(cell_start[cell], cell_start[cell + 1]):
+                    if not _far(cell_box, k, qx, qy, qz, reach):
+                        t = cell_tris[k]
+                        seen = False
+                        for j in range(count):  # a triangle may be listed in several of the cells
+                            if near[m, p, j] == t:
+                                seen = True
+                                break
+                        if not seen:
+                            if count == room:
+                                return -1
+                            near[m, p, count] = t
+                            count += 1
+    return count
+
+
+@njit(**EXACT)
+def _brute_fold(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, r: float
+                ) -> tuple[float, float, float, float, int, int, float, int]:
+    """The fold (:func:`_fold`) over every triangle of mesh ``m``: the reference the tests hold the
+    lists and the grid to (compiled apart, so the pass does not carry a third copy of the tests)."""
+    tbox = mesh.tbox
+    r2 = r * r
+    bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
+    for t in range(mesh.dims[m, DIMS_TRI0], mesh.dims[m, DIMS_TRI1]):
+        if not _far(tbox, t, qx, qy, qz, r):
+            d2, px, py, pz, f, s = tri_test(mesh.verts, mesh.tris, mesh.fnorm, t, lx, ly, lz, qx, qy, qz, r)
+            bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy, bpz, bt, bf,
+                                                       bs, bh)
+    return bd2, bpx, bpy, bpz, bt, bf, bs, bh
+
+
+@njit(**EXACT)
+def _grid_fold(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, r: float
+               ) -> tuple[float, float, float, float, int, int, float, int]:
+    """The fold (:func:`_fold`) over the triangles the grid lists near q: for a point without a
+    list (one that moves fast, or has too many triangles near it; compiled apart, as it is rare)."""
+    x0, x1, y0, y1, z0, z1 = _grid_range(mesh, m, qx, qy, qz, r)
+    dims = mesh.dims
+    nx, ny = dims[m, DIMS_N], dims[m, DIMS_N + 1]
+    base = dims[m, DIMS_CELL0]
+    cell_start = mesh.cell_start
+    cell_tris = mesh.cell_tris
+    cell_box = mesh.cell_box
+    r2 = r * r
+    bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
+    for cz in range(z0, z1 + 1):
+        for cy in range(y0, y1 + 1):
+            for cx in range(x0, x1 + 1):
+                cell = base + (cz * ny + cy) * nx + cx
+                # the boxes in a row, read in order; the triangle's own data only for the near ones
+                for k in range(cell_start[cell], cell_start[cell + 1]):
+                    if not _far(cell_box, k, qx, qy, qz, r):
+                        t = cell_tris[k]
+                        d2, px, py, pz, f, s = tri_test(mesh.verts, mesh.tris, mesh.fnorm, t, lx, ly, lz, qx, qy,
+                                                        qz, r)
+                        bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy,
+                                                                   bpz, bt, bf, bs, bh)
+    return bd2, bpx, bpy, bpz, bt, bf, bs, bh
+
+
+@njit(inline="always", **EXACT)
+def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float,
+                  brute: bool) -> tuple[bool, float, float, float]:
+    """Collide point ``p`` (mesh frame: last ``l``, now ``q``) with mesh ``m``: (contact?, the
+    corrected position before friction). ``brute`` tests every triangle instead of the point's
+    list or the grid's cells (same answer)."""
+    info = mesh.info
     r = mesh.thickness + math.sqrt((qx - lx) ** 2 + (qy - ly) ** 2 + (qz - lz) ** 2)
     if (qx + r < info[m, INFO_LO] or qx - r > info[m, INFO_HI] or qy + r < info[m, INFO_LO + 1]
             or qy - r > info[m, INFO_HI + 1] or qz + r < info[m, INFO_LO + 2] or qz - r > info[m, INFO_HI + 2]):
         return False, qx, qy, qz
-    verts = mesh.verts
-    tris = mesh.tris
-    tbox = mesh.tbox
-    fnorm = mesh.fnorm
-    r2 = r * r
-    bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
-    if brute:
-        for t in range(dims[m, DIMS_TRI0], dims[m, DIMS_TRI1]):
+    # The point's own list (see the module's docstring) holds every triangle within the list's
+    # reach of its anchor, so it holds every one within r of q while q has moved less than
+    # reach - r (per axis) from the anchor; else it is gathered afresh at q, if r leaves room.
+    count = -1
+    near_n = mesh.near_n
+    if p < near_n.shape[1] and not brute:
+        limit = info[m, INFO_NEAR_OK]
+        if r <= limit:
+            at = mesh.near_at
+            d = max(abs(qx - at[m, p, 0]), abs(qy - at[m, p, 1]), abs(qz - at[m, p, 2]))
+            count = near_n[m, p]
+            if not d + r <= limit:
+                count = gather_near(mesh, m, p, qx, qy, qz)
+                near_n[m, p] = count
+                at[m, p, 0], at[m, p, 1], at[m, p, 2] = qx, qy, qz
+    if count >= 0:
+        tbox = mesh.tbox
+        near = mesh.near_tris
+        r2 = r * r
+        bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
+        for j in range(count):
+            t = np.int64(near[m, p, j])
             if not _far(tbox, t, qx, qy, qz, r):
-                d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
+                d2, px, py, pz, f, s = tri_test(mesh.verts, mesh.tris, mesh.fnorm, t, lx, ly, lz, qx, qy, qz, r)
                 bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy, bpz, bt,
                                                            bf, bs, bh)
+    elif brute:
+        bd2, bpx, bpy, bpz, bt, bf, bs, bh = _brute_fold(mesh, m, lx, ly, lz, qx, qy, qz, r)
     else:
-        inv_h = info[m, INFO_INV_H]
-        nx, ny, nz = dims[m, DIMS_N], dims[m, DIMS_N + 1], dims[m, DIMS_N + 2]
-        x0 = _cell(qx - r, info[m, INFO_LO], inv_h, nx)
-        x1 = _cell(qx + r, info[m, INFO_LO], inv_h, nx)
-        y0 = _cell(qy - r, info[m, INFO_LO + 1], inv_h, ny)
-        y1 = _cell(qy + r, info[m, INFO_LO + 1], inv_h, ny)
-        z0 = _cell(qz - r, info[m, INFO_LO + 2], inv_h, nz)
-        z1 = _cell(qz + r, info[m, INFO_LO + 2], inv_h, nz)
-        base = dims[m, DIMS_CELL0]
-        cell_start = mesh.cell_start
-        cell_tris = mesh.cell_tris
-        for cz in range(z0, z1 + 1):
-            for cy in range(y0, y1 + 1):
-                for cx in range(x0, x1 + 1):
-                    cell = base + (cz * ny + cy) * nx + cx
-                    for e in range(cell_start[cell], cell_start[cell + 1]):
-                        t = cell_tris[e]
-                        if not _far(tbox, t, qx, qy, qz, r):
-                            d2, px, py, pz, f, s = tri_test(verts, tris, fnorm, t, lx, ly, lz, qx, qy, qz, r)
-                            bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy,
-                                                                       bpz, bt, bf, bs, bh)
+        bd2, bpx, bpy, bpz, bt, bf, bs, bh = _grid_fold(mesh, m, lx, ly, lz, qx, qy, qz, r)
     return resolve(mesh, m, lx, ly, lz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
 
 
@@ -267,7 +371,7 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
     for k in range(free.shape[0]):
         p = free[k]
         lx, ly, lz = last[0, p] - bx, last[1, p] - by, last[2, p] - bz
-        hit, ox, oy, oz = point_contact(mesh, m, lx, ly, lz, pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az, brute)
+        hit, ox, oy, oz = point_contact(mesh, m, p, lx, ly, lz, pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az, brute)
         if hit:
             pos[0, p] = ax + lx + (ox - lx) * keep
             pos[1, p] = ay + ly + (oy - ly) * keep

@@ -9,11 +9,18 @@ translation at the substep's start and end: put there each substep for a moving 
 :func:`clothsim.sim.passes.colliders.moving.update_poses`, like every moving collider), and a
 uniform grid of its triangles.
 
-The grid: cubic cells of edge ``h`` over the mesh's bounding box, ``h`` the mean of the
-triangles' largest bounding-box sides (grown until there are at most 8 cells per triangle, so a
-flat or long mesh cannot make the grid huge); a triangle is listed in every cell its bounding box
-overlaps. A point's query visits the cells its query box overlaps. Cell indices are
-``floor((x - lo) * inv_h)`` clipped to the grid, the same expression here and in the kernel.
+The grid: cubic cells of edge ``h`` over the mesh's bounding box; a triangle is listed in every
+cell that its bounding box, grown by the grid's margin (the cloth's thickness), overlaps, with a
+copy of its box beside it. A point's query box is ``q +- r``, ``r`` = thickness + |q - l|: a
+triangle whose box overlaps it has its grown box overlap ``q +- (r - margin)``, which is ``q``
+itself for a point that has not moved, so a point usually visits one cell, and finds there only
+the triangles near it, their boxes in a row. ``h`` is the mean of the triangles' largest
+bounding-box sides plus the margin (grown until there are at most 8 cells per triangle, so a flat
+or long mesh cannot make the grid huge). Cell indices are ``floor((x - lo) * inv_h)`` clipped to
+the grid, the same expression here and in the kernel; clipping keeps the order of coordinates, so
+the overlap of a grown box and a query box survives it, and the listing's margin is wider than
+the query's by far more than the rounding of either (the grid finds every triangle the
+brute-force test does).
 """
 
 from __future__ import annotations
@@ -27,10 +34,18 @@ from ....scene import Scene
 from ...clock import track_at
 
 #: Columns of ``MeshGroup.info`` (float64) and ``MeshGroup.dims`` (int64), one row per mesh.
-INFO_LO, INFO_HI, INFO_INV_H, INFO_FRICTION = 0, 3, 6, 7
+INFO_LO, INFO_HI, INFO_INV_H, INFO_FRICTION, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK = 0, 3, 6, 7, 8, 9, 10
 DIMS_TRI0, DIMS_TRI1, DIMS_CELL0, DIMS_N, DIMS_CLOSED = 0, 1, 2, 3, 6
 #: Most cells per triangle the grid may have (see the module's docstring).
 MAX_CELLS_PER_TRIANGLE = 8
+#: How much wider (relative to the margin plus the mesh's size) a triangle's listing is than the
+#: query assumes: far beyond the rounding of either side's sums, far below a cell.
+LISTING_SLACK = 1e-9
+#: A point's list reaches this many thicknesses from its anchor: the wider, the longer a moving
+#: point keeps its list, the more triangles in it.
+NEAR_REACH = 1.5
+#: Most triangles a point's list holds (more: that point asks the grid, every substep).
+NEAR_ROOM = 64
 
 
 class MeshGroup(NamedTuple):
@@ -42,10 +57,15 @@ class MeshGroup(NamedTuple):
     fnorm: np.ndarray  # (T, 3) unit face normals
     enorm: np.ndarray  # (T, 3, 3) unit edge pseudo-normals, edge k = corner k -> corner k+1
     vnorm: np.ndarray  # (V, 3) unit angle-weighted vertex pseudo-normals
-    info: np.ndarray  # (M, 8) bounding box lo, hi (local), 1/cell edge, friction
+    info: np.ndarray  # (M, 11) bounding box lo, hi (local), 1/cell edge, friction, grid margin, list reach and
+    # the reach a query may have within it
     dims: np.ndarray  # (M, 7) first and end triangle, first cell, cells along x y z, closed
     cell_start: np.ndarray  # (C + 1,) int64
     cell_tris: np.ndarray  # (E,) int64 triangle ids, cell by cell
+    cell_box: np.ndarray  # (E, 6) those triangles' bounding boxes (= tbox rows), in the same order
+    near_at: np.ndarray  # (M, N, 3) each point's anchor, where its list of each mesh was gathered (mesh frame)
+    near_n: np.ndarray  # (M, N) int64 triangles in that list; -1: none (too many, or never gathered)
+    near_tris: np.ndarray  # (M, N, NEAR_ROOM) int32 the list: every triangle whose box comes within reach
     pose: np.ndarray  # (M, 6) translation at the substep's start and at its end
     thickness: float
     #: address of the mesh pass compiled for this group (see :func:`clothsim.sim.solvers.frame.kernel_addresses`); 0 until known
@@ -82,16 +102,17 @@ def pseudo_normals(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.
     return fn, en, _unit_rows(vn)
 
 
-def build_grid(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, tuple[int, int, int],
-                                                           np.ndarray, np.ndarray]:
-    """The uniform grid of one mesh: (lo, hi, inv_h, cells along x y z, cell_start, cell_tris);
+def build_grid(verts: np.ndarray, tris: np.ndarray, margin: float
+               ) -> tuple[np.ndarray, np.ndarray, float, tuple[int, int, int], np.ndarray, np.ndarray]:
+    """The uniform grid of one mesh, its triangles listed with their boxes grown by ``margin``
+    (see the module's docstring): (lo, hi, inv_h, cells along x y z, cell_start, cell_tris);
     triangle ids in ``cell_tris`` are local to ``tris``."""
     lo = verts.min(axis=0)
     hi = verts.max(axis=0)
     tlo = np.minimum(np.minimum(verts[tris[:, 0]], verts[tris[:, 1]]), verts[tris[:, 2]])
     thi = np.maximum(np.maximum(verts[tris[:, 0]], verts[tris[:, 1]]), verts[tris[:, 2]])
     extent = np.maximum(hi - lo, 0.0)
-    h = float(np.mean((thi - tlo).max(axis=1)))
+    h = float(np.mean((thi - tlo).max(axis=1))) + margin
     if not h > 0.0:
         h = max(float(extent.max()), 1e-9)
     limit = MAX_CELLS_PER_TRIANGLE * tris.shape[0] + 64
@@ -101,12 +122,13 @@ def build_grid(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.ndar
             break
         h *= 1.25
     inv_h = 1.0 / h
+    grow = margin + LISTING_SLACK * (margin + float(np.abs(verts).max()))
 
     def cell(x: np.ndarray) -> np.ndarray:
         return np.clip(np.floor((x - lo) * inv_h).astype(np.int64), 0, n - 1)
 
-    c0 = cell(tlo)
-    c1 = cell(thi)
+    c0 = cell(tlo - grow)
+    c1 = cell(thi + grow)
     span = c1 - c0 + 1
     count = np.prod(span, axis=1)
     ids = np.repeat(np.arange(tris.shape[0], dtype=np.int64), count)
@@ -130,7 +152,9 @@ def mesh_group(scene: Scene) -> MeshGroup | None:
     if not scene.meshes:
         return None
     verts, tris, fnorm, enorm, vnorm, starts, cells = ([] for _ in range(7))
-    info = np.zeros((len(scene.meshes), 8))
+    info = np.zeros((len(scene.meshes), 11))
+    n_points = scene.cloth.num_width_points * scene.cloth.num_height_points
+    thickness = scene.cloth.thickness
     dims = np.zeros((len(scene.meshes), 7), dtype=np.int64)
     pose = np.zeros((len(scene.meshes), 6))
     here = np.empty(3)
@@ -139,12 +163,16 @@ def mesh_group(scene: Scene) -> MeshGroup | None:
         v = spec.local_vertices()
         t = spec.triangles
         fn, en, vn = pseudo_normals(v, t)
-        lo, hi, inv_h, n, start, cell_tris = build_grid(v, t)
+        lo, hi, inv_h, n, start, cell_tris = build_grid(v, t, thickness)
         track = spec.track()
         info[m, INFO_LO:INFO_LO + 3] = lo
         info[m, INFO_HI:INFO_HI + 3] = hi
         info[m, INFO_INV_H] = inv_h
         info[m, INFO_FRICTION] = spec.friction
+        info[m, INFO_MARGIN] = thickness
+        info[m, INFO_NEAR] = NEAR_REACH * thickness
+        # the list is used only where the rounding of both sides' sums cannot matter
+        info[m, INFO_NEAR_OK] = info[m, INFO_NEAR] - LISTING_SLACK * (info[m, INFO_NEAR] + float(np.abs(v).max()))
         dims[m] = (nt, nt + t.shape[0], nc, *n, int(spec.closed))
         # where it stands at time 0 (a static mesh stays there), by the kernels' own evaluation
         track_at(track.times, track.points, track.velocity, 0.0, here)
@@ -161,15 +189,18 @@ def mesh_group(scene: Scene) -> MeshGroup | None:
         nt += t.shape[0]
         nc += start.size - 1
     cell_start = np.concatenate([*starts, [sum(c.size for c in cells)]]).astype(np.int64)
-    thickness = scene.cloth.thickness
     all_verts = np.ascontiguousarray(np.concatenate(verts))
     all_tris = np.ascontiguousarray(np.concatenate(tris))
     corners = all_verts[all_tris]  # (T, 3, 3)
     tbox = np.ascontiguousarray(np.concatenate([corners.min(axis=1), corners.max(axis=1)], axis=1))
+    cell_tris = np.ascontiguousarray(np.concatenate(cells))
+    all_fnorm = np.ascontiguousarray(np.concatenate(fnorm))
     return MeshGroup(all_verts, all_tris, tbox,
-                     np.ascontiguousarray(np.concatenate(fnorm)), np.ascontiguousarray(np.concatenate(enorm)),
+                     all_fnorm, np.ascontiguousarray(np.concatenate(enorm)),
                      np.ascontiguousarray(np.concatenate(vnorm)), info, dims, cell_start,
-                     np.ascontiguousarray(np.concatenate(cells)), pose, float(thickness))
+                     cell_tris, np.ascontiguousarray(tbox[cell_tris]), np.full((len(scene.meshes), n_points, 3), np.inf),
+                     np.full((len(scene.meshes), n_points), -1, dtype=np.int64),
+                     np.zeros((len(scene.meshes), n_points, NEAR_ROOM), dtype=np.int32), pose, float(thickness))
 
 
 def cells_per_mesh(group: MeshGroup) -> list[int]:
