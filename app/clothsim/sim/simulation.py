@@ -20,7 +20,7 @@ from .passes.colliders.moving import pack_motion, top_speed
 from .passes.colliders.shapes import collider_rows
 from .passes.colliders.meshgrid import mesh_group
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
-from .passes.contact import contact_group, response_reach
+from .passes.contact import contact_group, count_crossings, response_reach
 from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash, Wind
 
 #: The contact mode: a pass of its own (passes/contact.py), not a query of the hash.
@@ -93,6 +93,7 @@ class Simulation:
         self.colliders_skipped = 0
         # Extra per-run state of the non-spec integrators (e.g. velocities); None = start afresh.
         self.integrator_state: object = None
+        self._crossings_checked = False
         self._replan()
         self._place_pins()
 
@@ -361,6 +362,7 @@ class Simulation:
         self.frame = 0
         self.colliders_skipped = 0
         self.integrator_state = None
+        self._crossings_checked = False
         self._clock[:] = 0.0
         self._place_pins()
 
@@ -432,6 +434,24 @@ class Simulation:
         if contact is not None:
             contact.meta[0] = 0
 
+    def self_crossings(self) -> int:
+        """Edges of the cloth's mesh that pierce a triangle they share no point with, now."""
+        tris = triangles(self.nw, self.nh).astype(np.int64)
+        group = self._contact_group() or contact_group(self._pos, tris, ~self.pinned, self.scene.cloth.thickness)
+        return int(count_crossings(self._pos, group.tris, group.edges, group.cell))
+
+    def _check_crossings(self) -> None:
+        # once per start: the contact mode keeps a cloth from crossing itself, but cannot undo
+        # crossings it is given (positions set through the API)
+        self._crossings_checked = True
+        found = self.self_crossings()
+        if found:
+            import warnings
+
+            warnings.warn(f"self_collision \"contact\": the cloth starts with {found} self-crossing"
+                          f"{'s' if found != 1 else ''} (mesh edges through triangles); they are kept from "
+                          "growing, not undone", RuntimeWarning, stacklevel=4)
+
     def _advance_frame(self, run=None) -> None:  # noqa: ANN001
         """One frame through ``run(steps, saved)`` (default :meth:`_run`), under the blow-up guard."""
         # Once per frame: a non-finite position or an exploding kinetic energy stops the run
@@ -439,6 +459,8 @@ class Simulation:
         from .guard import sim_blow_up_reason
 
         run = run or self._run
+        if self._kernel_args.contact is not None and not self._crossings_checked:
+            self._check_crossings()
         state = self.integrator_state
         saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy(), self._clock.copy())
         self._forget_contacts()

@@ -12,9 +12,10 @@ and edge-edge, both ways, within the query radius). A state in which every point
 is crossing-free, and so is every state on the straight path from the reference to it (a ball is
 convex): two elements at distance d each move less than d/2. In each substep:
 
-1. (self-collision slot) if any point's position at the substep's start, or after the
-   integrator, has left its ball, the reference is rebuilt from the positions the substep
-   started from (crossing-free, by the same argument);
+1. (self-collision slot) if any point's position at the substep's start has left its ball, or
+   its position after the integrator would (for a point whose ball is not tiny: ROOMY), the
+   reference is rebuilt from the positions the substep started from (crossing-free, by the same
+   argument), and at the first substep of every frame;
 2. (self-collision slot) every stored pair closer than the contact distance is pushed apart along its reference normal
    (inelastically, plus a fraction of the overlap), with Coulomb friction on the pair's relative
    tangential motion; corrections are averaged per point (Jacobi, in pair order);
@@ -51,6 +52,11 @@ FRICTION = 0.3
 MAX_THICKNESS_PER_EDGE = 0.5
 #: Query radius over the contact distance.
 REACH = 1.5
+#: A point about to leave its ball calls for a new reference only if its ball is at least this
+#: fraction of the largest (GAMMA x the query radius): a point held a hair from another element
+#: would otherwise rebuild every substep and gain nothing; it waits, clamped, for the next rebuild
+#: (at the latest the next frame's first substep).
+ROOMY = 0.25
 
 # meta fields
 VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE = 0, 1, 2, 3, 4, 5
@@ -221,6 +227,11 @@ def _cell(v: float, inv: float) -> np.int64:
     return np.int64(np.floor(v * inv))
 
 
+@njit(inline="always", **KERNEL)
+def _slot_of(key: np.int64, mask: np.uint64) -> np.int64:
+    return np.int64(((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(32)) & mask)
+
+
 @njit(**KERNEL)
 def cell_table(box: np.ndarray, cell: float) -> tuple:
     """Every box in every cell it overlaps, counting-sorted by hash slot: (start (table + 1,),
@@ -251,7 +262,7 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
                     key = _cell_key(ix, iy, iz)
                     keys[i] = key
                     ids[i] = k
-                    start[np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(32)) & mask] += 1
+                    start[_slot_of(key, mask)] += 1
                     i += 1
     acc = 0
     for s in range(table):
@@ -263,7 +274,7 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
     sids = np.empty(total, dtype=np.int64)
     cursor = start[:table].copy()
     for j in range(total):
-        s = np.int64((np.uint64(keys[j]) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(32)) & mask
+        s = _slot_of(keys[j], mask)
         skeys[cursor[s]] = keys[j]
         sids[cursor[s]] = ids[j]
         cursor[s] += 1
@@ -286,108 +297,140 @@ def _first_cell(box: np.ndarray, a: int, b: int, inv: float) -> np.int64:
 # the reference state
 
 
+@njit(inline="always", **KERNEL)
+def _point_triangle(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray, npt: int) -> int:
+    """Test one point-triangle pair; returns the pairs stored (npt, or npt + 1)."""
+    tris = c.tris
+    a, b, cc = tris[0, t], tris[1, t], tris[2, t]
+    if p == a or p == b or p == cc:
+        return npt
+    wa, wb, wc = closest_on_triangle(x[0, p], x[1, p], x[2, p], x[0, a], x[1, a], x[2, a], x[0, b],
+                                     x[1, b], x[2, b], x[0, cc], x[1, cc], x[2, cc])
+    nx = x[0, p] - (wa * x[0, a] + wb * x[0, b] + wc * x[0, cc])
+    ny = x[1, p] - (wa * x[1, a] + wb * x[1, b] + wc * x[1, cc])
+    nz = x[2, p] - (wa * x[2, a] + wb * x[2, b] + wc * x[2, cc])
+    d = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if d >= c.radius:
+        return npt
+    dmin[p] = min(dmin[p], d)
+    dmin[a] = min(dmin[a], d)
+    dmin[b] = min(dmin[b], d)
+    dmin[cc] = min(dmin[cc], d)
+    if d > 0.0:
+        if npt < c.pt.shape[1]:
+            c.pt[0, npt] = p
+            c.pt[1, npt] = t
+            c.ptf[0, npt] = wa
+            c.ptf[1, npt] = wb
+            c.ptf[2, npt] = wc
+            c.ptf[3, npt] = nx / d
+            c.ptf[4, npt] = ny / d
+            c.ptf[5, npt] = nz / d
+            return npt + 1
+        c.meta[DROPPED] += 1
+    return npt
+
+
+@njit(inline="always", **KERNEL)
+def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, nee: int) -> int:
+    """Test one edge-edge pair; returns the pairs stored."""
+    edges = c.edges
+    p1, q1 = edges[0, e1], edges[1, e1]
+    p2, q2 = edges[0, e2], edges[1, e2]
+    if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
+        return nee
+    u, v = closest_on_segments(x[0, p1], x[1, p1], x[2, p1], x[0, q1], x[1, q1], x[2, q1], x[0, p2],
+                               x[1, p2], x[2, p2], x[0, q2], x[1, q2], x[2, q2])
+    nx = (x[0, p1] + u * (x[0, q1] - x[0, p1])) - (x[0, p2] + v * (x[0, q2] - x[0, p2]))
+    ny = (x[1, p1] + u * (x[1, q1] - x[1, p1])) - (x[1, p2] + v * (x[1, q2] - x[1, p2]))
+    nz = (x[2, p1] + u * (x[2, q1] - x[2, p1])) - (x[2, p2] + v * (x[2, q2] - x[2, p2]))
+    d = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if d >= c.radius:
+        return nee
+    dmin[p1] = min(dmin[p1], d)
+    dmin[q1] = min(dmin[q1], d)
+    dmin[p2] = min(dmin[p2], d)
+    dmin[q2] = min(dmin[q2], d)
+    if d > 0.0:
+        if nee < c.ee.shape[1]:
+            c.ee[0, nee] = e1
+            c.ee[1, nee] = e2
+            c.eef[0, nee] = u
+            c.eef[1, nee] = v
+            c.eef[2, nee] = nx / d
+            c.eef[3, nee] = ny / d
+            c.eef[4, nee] = nz / d
+            return nee + 1
+        c.meta[DROPPED] += 1
+    return nee
+
+
+@njit(**KERNEL)
+def _element_boxes(x: np.ndarray, ids: np.ndarray, pad: float) -> np.ndarray:
+    """(6, K) boxes (lo, hi) of the elements whose corners are the columns of ``ids`` (k, K),
+    widened by ``pad``."""
+    m = ids.shape[1]
+    box = np.empty((6, m))
+    for ax in range(3):
+        for e in range(m):
+            lo = x[ax, ids[0, e]]
+            hi = lo
+            for k in range(1, ids.shape[0]):
+                v = x[ax, ids[k, e]]
+                lo = min(lo, v)
+                hi = max(hi, v)
+            box[ax, e] = lo - pad
+            box[3 + ax, e] = hi + pad
+    return box
+
+
 @njit(**KERNEL)
 def rebuild(x: np.ndarray, c: Contact) -> None:
     """Make ``x`` (3, N) the reference: find every point-triangle and edge-edge pair closer than
-    the query radius, store them, and give each point its ball."""
+    the query radius, store them, and give each point its ball.
+
+    Point-triangle: the triangles' boxes, widened by the radius, go into the cells; each point
+    reads its own cell (a triangle is listed once per cell: no pair twice). Edge-edge: the edges'
+    boxes, widened by half the radius, go into the cells; a pair is tested in the cell holding
+    the lower corner of its boxes' intersection only.
+    """
     n = x.shape[1]
-    tris = c.tris
-    edges = c.edges
-    ne = edges.shape[1]
     radius = c.radius
     c.ref[:, :] = x
     dmin = np.full(n, radius)
-    box = _boxes(x, tris, edges, 0.5 * radius)
-    start, ids, keys = cell_table(box, c.cell)
     inv = 1.0 / c.cell
-    cap = c.pt.shape[1]
     npt = 0
     nee = 0
-    dropped = 0
-    table = start.shape[0] - 1
-    for s in range(table):
-        a0 = start[s]
+    # point-triangle
+    tbox = _element_boxes(x, c.tris, radius)
+    start, ids, keys = cell_table(tbox, c.cell)
+    mask = np.uint64(start.shape[0] - 2)
+    for p in range(n):
+        key = _cell_key(_cell(x[0, p], inv), _cell(x[1, p], inv), _cell(x[2, p], inv))
+        s = _slot_of(key, mask)
+        for i in range(start[s], start[s + 1]):
+            if keys[i] != key:
+                continue
+            t = ids[i]
+            if (x[0, p] < tbox[0, t] or x[0, p] > tbox[3, t] or x[1, p] < tbox[1, t] or x[1, p] > tbox[4, t]
+                    or x[2, p] < tbox[2, t] or x[2, p] > tbox[5, t]):
+                continue
+            npt = _point_triangle(x, c, p, t, dmin, npt)
+    # edge-edge
+    ebox = _element_boxes(x, c.edges, 0.5 * radius)
+    start, ids, keys = cell_table(ebox, c.cell)
+    for s in range(start.shape[0] - 1):
         a1 = start[s + 1]
-        for i in range(a0, a1):
+        for i in range(start[s], a1):
             ki = keys[i]
             ei = ids[i]
             for j in range(i + 1, a1):
                 if keys[j] != ki:
                     continue
                 ej = ids[j]
-                # point-triangle (either order) or edge-edge
-                p = -1
-                t = -1
-                if ei < n and ej >= n + ne:
-                    p, t = ei, ej - n - ne
-                elif ej < n and ei >= n + ne:
-                    p, t = ej, ei - n - ne
-                elif n <= ei < n + ne and n <= ej < n + ne:
-                    pass
-                else:
+                if _first_cell(ebox, ei, ej, inv) != ki:
                     continue
-                if _first_cell(box, ei, ej, inv) != ki:
-                    continue
-                if p >= 0:
-                    a, b, cc = tris[0, t], tris[1, t], tris[2, t]
-                    if p == a or p == b or p == cc:
-                        continue
-                    wa, wb, wc = closest_on_triangle(x[0, p], x[1, p], x[2, p], x[0, a], x[1, a], x[2, a], x[0, b],
-                                                     x[1, b], x[2, b], x[0, cc], x[1, cc], x[2, cc])
-                    nx = x[0, p] - (wa * x[0, a] + wb * x[0, b] + wc * x[0, cc])
-                    ny = x[1, p] - (wa * x[1, a] + wb * x[1, b] + wc * x[1, cc])
-                    nz = x[2, p] - (wa * x[2, a] + wb * x[2, b] + wc * x[2, cc])
-                    d = np.sqrt(nx * nx + ny * ny + nz * nz)
-                    if d >= radius:
-                        continue
-                    dmin[p] = min(dmin[p], d)
-                    dmin[a] = min(dmin[a], d)
-                    dmin[b] = min(dmin[b], d)
-                    dmin[cc] = min(dmin[cc], d)
-                    if d > 0.0:
-                        if npt < cap:
-                            c.pt[0, npt] = p
-                            c.pt[1, npt] = t
-                            c.ptf[0, npt] = wa
-                            c.ptf[1, npt] = wb
-                            c.ptf[2, npt] = wc
-                            c.ptf[3, npt] = nx / d
-                            c.ptf[4, npt] = ny / d
-                            c.ptf[5, npt] = nz / d
-                            npt += 1
-                        else:
-                            dropped += 1
-                else:
-                    e1 = ei - n
-                    e2 = ej - n
-                    p1, q1 = edges[0, e1], edges[1, e1]
-                    p2, q2 = edges[0, e2], edges[1, e2]
-                    if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
-                        continue
-                    u, v = closest_on_segments(x[0, p1], x[1, p1], x[2, p1], x[0, q1], x[1, q1], x[2, q1], x[0, p2],
-                                               x[1, p2], x[2, p2], x[0, q2], x[1, q2], x[2, q2])
-                    nx = (x[0, p1] + u * (x[0, q1] - x[0, p1])) - (x[0, p2] + v * (x[0, q2] - x[0, p2]))
-                    ny = (x[1, p1] + u * (x[1, q1] - x[1, p1])) - (x[1, p2] + v * (x[1, q2] - x[1, p2]))
-                    nz = (x[2, p1] + u * (x[2, q1] - x[2, p1])) - (x[2, p2] + v * (x[2, q2] - x[2, p2]))
-                    d = np.sqrt(nx * nx + ny * ny + nz * nz)
-                    if d >= radius:
-                        continue
-                    dmin[p1] = min(dmin[p1], d)
-                    dmin[q1] = min(dmin[q1], d)
-                    dmin[p2] = min(dmin[p2], d)
-                    dmin[q2] = min(dmin[q2], d)
-                    if d > 0.0:
-                        if nee < cap:
-                            c.ee[0, nee] = e1
-                            c.ee[1, nee] = e2
-                            c.eef[0, nee] = u
-                            c.eef[1, nee] = v
-                            c.eef[2, nee] = nx / d
-                            c.eef[3, nee] = ny / d
-                            c.eef[4, nee] = nz / d
-                            nee += 1
-                        else:
-                            dropped += 1
+                nee = _edge_edge(x, c, min(ei, ej), max(ei, ej), dmin, nee)
     for p in range(n):
         r = GAMMA * dmin[p]
         c.rho2[p] = r * r
@@ -395,19 +438,36 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     c.meta[N_PT] = npt
     c.meta[N_EE] = nee
     c.meta[REBUILDS] += 1
-    c.meta[DROPPED] += dropped
+
+
+@njit(**KERNEL)
+def _leaving(x: np.ndarray, c: Contact) -> bool:
+    """True when a point with a roomy ball (see ROOMY) lies outside it in ``x``."""
+    ref = c.ref
+    rho2 = c.rho2
+    roomy = (ROOMY * GAMMA * c.radius) ** 2
+    for p in range(x.shape[1]):
+        if rho2[p] < roomy:
+            continue
+        dx = x[0, p] - ref[0, p]
+        dy = x[1, p] - ref[1, p]
+        dz = x[2, p] - ref[2, p]
+        if dx * dx + dy * dy + dz * dz > rho2[p]:
+            return True
+    return False
 
 
 @njit(**KERNEL)
 def _outside(x: np.ndarray, c: Contact) -> bool:
-    """True when a point of ``x`` lies outside its ball."""
+    """True when a point of ``x`` lies outside its ball (by more than rounding: a ball of a few
+    nanometres, next to an element the cloth was given crossing, is placed to 1e-16 m)."""
     ref = c.ref
     rho2 = c.rho2
     for p in range(x.shape[1]):
         dx = x[0, p] - ref[0, p]
         dy = x[1, p] - ref[1, p]
         dz = x[2, p] - ref[2, p]
-        if dx * dx + dy * dy + dz * dz > rho2[p]:
+        if dx * dx + dy * dy + dz * dz > rho2[p] * (1.0 + 1e-6) + 1e-28:
             return True
     return False
 
@@ -528,7 +588,8 @@ def bound(pos: np.ndarray, c: Contact) -> None:
         dz = pos[2, p] - ref[2, p]
         r2 = dx * dx + dy * dy + dz * dz
         if r2 > rho2[p]:
-            f = np.sqrt(rho2[p] / r2)
+            # (a hair inside, so rounding does not leave it outside and force a rebuild)
+            f = np.sqrt(rho2[p] / r2) * (1.0 - 1e-9)
             pos[0, p] = ref[0, p] + dx * f
             pos[1, p] = ref[1, p] + dy * f
             pos[2, p] = ref[2, p] + dz * f
@@ -538,7 +599,7 @@ def bound(pos: np.ndarray, c: Contact) -> None:
 def contact_respond(pos: np.ndarray, last: np.ndarray, c: Contact) -> None:
     """The first half of the pass, in the self-collision slot of a substep that started at
     ``last``: rebuild the reference if a point has left its ball, then push the pairs apart."""
-    if c.meta[VALID] == 0 or _outside(last, c) or _outside(pos, c):
+    if c.meta[VALID] == 0 or _outside(last, c) or _leaving(pos, c):
         rebuild(last, c)
         # a pinned point that moved further than its ball in this one substep: the bound cannot
         # hold for its pairs (the pin's motion is prescribed); counted, not hidden
@@ -563,3 +624,55 @@ def response_reach(c: Contact) -> float:
     """The furthest the response moves a point in one substep: an average of pushes of at most
     the contact distance (plus friction), over a weight sum of at least 1/2."""
     return 2.0 * (1.0 + FRICTION) * c.thickness
+
+
+# ------------------------------------------------------------------------------------------------
+# crossings (for the warning about a cloth that starts crossed)
+
+
+@njit(inline="always", **KERNEL)
+def _volume(a: int, b: int, c: int, d: int, x: np.ndarray) -> float:
+    ux, uy, uz = x[0, b] - x[0, a], x[1, b] - x[1, a], x[2, b] - x[2, a]
+    vx, vy, vz = x[0, c] - x[0, a], x[1, c] - x[1, a], x[2, c] - x[2, a]
+    wx, wy, wz = x[0, d] - x[0, a], x[1, d] - x[1, a], x[2, d] - x[2, a]
+    return (uy * vz - uz * vy) * wx + (uz * vx - ux * vz) * wy + (ux * vy - uy * vx) * wz
+
+
+@njit(**EXACT)
+def count_crossings(x: np.ndarray, tris: np.ndarray, edges: np.ndarray, cell: float) -> int:
+    """Edge-triangle pairs sharing no point where the edge pierces the triangle (signed volumes),
+    the candidates from the broad phase's cells."""
+    n = x.shape[1]
+    ne = edges.shape[1]
+    box = _boxes(x, tris, edges, 0.0)
+    sub = np.ascontiguousarray(box[:, n:])  # edges, then triangles
+    start, ids, keys = cell_table(sub, cell)
+    inv = 1.0 / cell
+    found = 0
+    for s in range(start.shape[0] - 1):
+        for i in range(start[s], start[s + 1]):
+            for j in range(i + 1, start[s + 1]):
+                if keys[j] != keys[i]:
+                    continue
+                a = ids[i]
+                b = ids[j]
+                if (a < ne) == (b < ne):
+                    continue
+                e = a if a < ne else b
+                t = (b if a < ne else a) - ne
+                if _first_cell(sub, a, b, inv) != keys[i]:
+                    continue
+                p, q = edges[0, e], edges[1, e]
+                ta, tb, tc = tris[0, t], tris[1, t], tris[2, t]
+                if p == ta or p == tb or p == tc or q == ta or q == tb or q == tc:
+                    continue
+                vp = _volume(ta, tb, tc, p, x)
+                vq = _volume(ta, tb, tc, q, x)
+                if not ((vp > 0.0 and vq < 0.0) or (vp < 0.0 and vq > 0.0)):
+                    continue
+                s1 = _volume(p, q, ta, tb, x)
+                s2 = _volume(p, q, tb, tc, x)
+                s3 = _volume(p, q, tc, ta, x)
+                if (s1 > 0.0 and s2 > 0.0 and s3 > 0.0) or (s1 < 0.0 and s2 < 0.0 and s3 < 0.0):
+                    found += 1
+    return found
