@@ -109,7 +109,7 @@ def contact_group(pos: np.ndarray, tris: np.ndarray, movable: np.ndarray, thickn
     return Contact(tris, edges, np.ascontiguousarray(movable, dtype=np.bool_), np.zeros((3, n)), np.zeros(n),
                    np.zeros((2, cap), dtype=np.int64), np.zeros((6, cap)), np.zeros((2, cap), dtype=np.int64),
                    np.zeros((5, cap)), np.zeros((3, n)), np.zeros(n, dtype=np.int64), np.zeros(META, dtype=np.int64),
-                   h, radius, max(radius, float(np.median(lengths))))
+                   h, radius, max(radius, 2.0 * float(np.median(lengths))))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -316,7 +316,8 @@ def _point_triangle(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray,
     dmin[a] = min(dmin[a], d)
     dmin[b] = min(dmin[b], d)
     dmin[cc] = min(dmin[cc], d)
-    if d > 0.0:
+    # (a pair further than the contact distance only bounds the motion; the response would skip it)
+    if 0.0 < d < c.thickness:
         if npt < c.pt.shape[1]:
             c.pt[0, npt] = p
             c.pt[1, npt] = t
@@ -351,7 +352,7 @@ def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, ne
     dmin[q1] = min(dmin[q1], d)
     dmin[p2] = min(dmin[p2], d)
     dmin[q2] = min(dmin[q2], d)
-    if d > 0.0:
+    if 0.0 < d < c.thickness:
         if nee < c.ee.shape[1]:
             c.ee[0, nee] = e1
             c.ee[1, nee] = e2
