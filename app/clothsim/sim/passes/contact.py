@@ -281,6 +281,41 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
     return start, sids, skeys
 
 
+@njit(**KERNEL)
+def corner_table(box: np.ndarray, cell: float) -> tuple:
+    """Every box once, in the cell of its lower corner, counting-sorted by hash slot: (start
+    (table + 1,), element id, cell key), both in slot order. With cells no smaller than any box,
+    the boxes that overlap box b have their lower corner in the cells from b's lower corner's
+    minus one to its upper corner's, along each axis."""
+    m = box.shape[1]
+    inv = 1.0 / cell
+    table = 1
+    while table < 2 * m:
+        table *= 2
+    mask = np.uint64(table - 1)
+    keys = np.empty(m, dtype=np.int64)
+    start = np.zeros(table + 1, dtype=np.int64)
+    for k in range(m):
+        key = _cell_key(_cell(box[0, k], inv), _cell(box[1, k], inv), _cell(box[2, k], inv))
+        keys[k] = key
+        start[_slot_of(key, mask)] += 1
+    acc = 0
+    for s in range(table):
+        c = start[s]
+        start[s] = acc
+        acc += c
+    start[table] = acc
+    skeys = np.empty(m, dtype=np.int64)
+    sids = np.empty(m, dtype=np.int64)
+    cursor = start[:table].copy()
+    for k in range(m):
+        s = _slot_of(keys[k], mask)
+        skeys[cursor[s]] = keys[k]
+        sids[cursor[s]] = k
+        cursor[s] += 1
+    return start, sids, skeys
+
+
 @njit(inline="always", **KERNEL)
 def _first_cell(box: np.ndarray, a: int, b: int, inv: float) -> np.int64:
     """Key of the cell holding the lower corner of boxes a and b's intersection, or -1 when they
@@ -390,10 +425,11 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     """Make ``x`` (3, N) the reference: find every point-triangle and edge-edge pair closer than
     the query radius, store them, and give each point its ball.
 
-    Point-triangle: the triangles' boxes, widened by the radius, go into the cells; each point
-    reads its own cell (a triangle is listed once per cell: no pair twice). Edge-edge: the edges'
-    boxes, widened by half the radius, go into the cells; a pair is tested in the cell holding
-    the lower corner of its boxes' intersection only.
+    Point-triangle: the triangles' boxes, widened by the radius, go into every cell they overlap;
+    each point reads its own cell (a triangle is listed once per cell: no pair twice). Edge-edge:
+    each edge's box, widened by half the radius, goes once into the cell of its lower corner
+    (cells at least as large as every box); each edge reads the cells where an overlapping box
+    can have its lower corner and tests the later edges found there.
     """
     n = x.shape[1]
     radius = c.radius
@@ -417,21 +453,33 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
                     or x[2, p] < tbox[2, t] or x[2, p] > tbox[5, t]):
                 continue
             npt = _point_triangle(x, c, p, t, dmin, npt)
-    # edge-edge
+    # edge-edge: each edge once, in its lower corner's cell (cells as large as the largest box)
     ebox = _element_boxes(x, c.edges, 0.5 * radius)
-    start, ids, keys = cell_table(ebox, c.cell)
-    for s in range(start.shape[0] - 1):
-        a1 = start[s + 1]
-        for i in range(start[s], a1):
-            ki = keys[i]
-            ei = ids[i]
-            for j in range(i + 1, a1):
-                if keys[j] != ki:
-                    continue
-                ej = ids[j]
-                if _first_cell(ebox, ei, ej, inv) != ki:
-                    continue
-                nee = _edge_edge(x, c, min(ei, ej), max(ei, ej), dmin, nee)
+    ne = ebox.shape[1]
+    ecell = c.cell
+    for e in range(ne):
+        ecell = max(ecell, ebox[3, e] - ebox[0, e], ebox[4, e] - ebox[1, e], ebox[5, e] - ebox[2, e])
+    einv = 1.0 / ecell
+    start, ids, keys = corner_table(ebox, ecell)
+    mask = np.uint64(start.shape[0] - 2)
+    for e1 in range(ne):
+        x0, x1 = _cell(ebox[0, e1], einv) - 1, _cell(ebox[3, e1], einv)
+        y0, y1 = _cell(ebox[1, e1], einv) - 1, _cell(ebox[4, e1], einv)
+        z0, z1 = _cell(ebox[2, e1], einv) - 1, _cell(ebox[5, e1], einv)
+        for ix in range(x0, x1 + 1):
+            for iy in range(y0, y1 + 1):
+                for iz in range(z0, z1 + 1):
+                    key = _cell_key(ix, iy, iz)
+                    s = _slot_of(key, mask)
+                    for i in range(start[s], start[s + 1]):
+                        e2 = ids[i]
+                        if e2 <= e1 or keys[i] != key:
+                            continue
+                        if (ebox[0, e2] > ebox[3, e1] or ebox[3, e2] < ebox[0, e1] or ebox[1, e2] > ebox[4, e1]
+                                or ebox[4, e2] < ebox[1, e1] or ebox[2, e2] > ebox[5, e1]
+                                or ebox[5, e2] < ebox[2, e1]):
+                            continue
+                        nee = _edge_edge(x, c, e1, e2, dmin, nee)
     for p in range(n):
         r = GAMMA * dmin[p]
         c.rho2[p] = r * r
