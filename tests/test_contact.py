@@ -12,12 +12,15 @@ import json
 import warnings
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 
 from clothsim.errors import SceneError
 from clothsim.scene import load_scene, scene_from_dict
 from clothsim.sim import Simulation
+from clothsim.sim.profile import Profiler
+from clothsim.sim.solvers.frame import PASS_ALL
 
 from crossings import crossings, mesh
 
@@ -177,3 +180,28 @@ def test_scene_rule_accepts_contact_and_names_it() -> None:
     assert scene_from_dict({**raw, "simulation": {"self_collision": "contact"}}).simulation.self_collision == "contact"
     with pytest.raises(SceneError, match='simulation.self_collision.*"contact"'):
         scene_from_dict({**raw, "simulation": {"self_collision": "touch"}})
+
+
+@pytest.mark.skipif(numba.get_num_threads() < 2, reason="Numba has one thread here: no team of two")
+def test_team_size_does_not_change_the_numbers() -> None:
+    scene = self_collision_scene(20)
+    out = []
+    for size in (1, 2):
+        sim = Simulation(scene)
+        for _ in range(40):
+            sim._forget_contacts()
+            assert sim.run_kernel(scene.simulation.simulation_steps, PASS_ALL, size)
+        out.append(sim.positions.copy())
+    assert np.array_equal(out[0], out[1])
+
+
+def test_fused_frame_matches_pass_by_pass_profile() -> None:
+    scene = self_collision_scene(20)
+    fused = Simulation(scene)
+    fused.step(40)
+    profiled = Simulation(scene)
+    profiler = Profiler(profiled)
+    for _ in range(40):
+        profiler.frame()
+    assert np.array_equal(fused.positions, profiled.positions)
+    assert profiler.calls["contact bound"] == 40 * scene.simulation.simulation_steps
