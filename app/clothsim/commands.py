@@ -20,8 +20,8 @@ def add_scene_overrides(p: argparse.ArgumentParser) -> None:
     p.add_argument("--steps", type=int, metavar="S", help="simulation_steps: substeps per frame (default: scene, else 30)")
     p.add_argument("--fps", type=float, metavar="F", help="frames_per_sec (default: scene, else 90)")
     p.add_argument("--seed", type=int, metavar="N", help="seed of the vertical cloth's jitter (default: scene, else 0)")
-    p.add_argument("--self-collision", choices=("spec", "grid", "off"),
-                   help="self-collision: the spec's same-cell hash, a 27-cell grid search, or off")
+    p.add_argument("--self-collision", choices=("spec", "grid", "off", "contact"),
+                   help="self-collision: the spec's same-cell hash, a 27-cell grid search, off, or contact (no crossings)")
     p.add_argument("--integrator", choices=("verlet", "symplectic_euler", "implicit_euler", "xpbd"),
                    help="time integrator (default: scene, else verlet as in the spec)")
     p.add_argument("--auto-substeps", action="store_true",

@@ -30,7 +30,7 @@ VERTICAL = 1
 
 INTEGRATORS = ("verlet", "symplectic_euler", "implicit_euler", "xpbd")
 DAMPING_MODES = ("spec", "rate")
-SELF_COLLISION_MODES = ("spec", "grid", "off")
+SELF_COLLISION_MODES = ("spec", "grid", "off", "contact")
 
 # Bytes a run needs per grid point. Measured with tracemalloc (NumPy reports its buffers to it)
 # over Simulation(scene) plus one frame, 64x64 to 512x512 points, every self-collision mode: the
@@ -288,7 +288,7 @@ SIMULATION = V.record({
     "gravity": V.default(V.vec3(), _SIM_DEFAULTS.gravity),
     "self_collision": V.default(
         V.choice(SELF_COLLISION_MODES, aliases={True: "spec", False: "off"},
-                 expected='true, false, "spec", "grid" or "off"'),
+                 expected='true, false, "spec", "grid", "off" or "contact"'),
         _SIM_DEFAULTS.self_collision),
     "seed": V.default(V.integer(ge=0, le=MAX_SEED), _SIM_DEFAULTS.seed),
     "integrator": V.default(V.choice(INTEGRATORS), _SIM_DEFAULTS.integrator),

@@ -28,7 +28,7 @@ MAX_POINTS = 256 * 256
 
 # Seconds per point and substep (measured medians, rounded up, contended machine).
 _INTEGRATOR_S = {"verlet": 30e-9, "symplectic_euler": 30e-9, "implicit_euler": 700e-9, "xpbd": 700e-9}
-_SELF_COLLISION_S = {"off": 0.0, "spec": 120e-9, "grid": 500e-9}
+_SELF_COLLISION_S = {"off": 0.0, "spec": 120e-9, "grid": 500e-9, "contact": 2000e-9}
 _PER_MESH_S = 120e-9
 _PER_OTHER_S = 10e-9  # each sphere, plane, capsule, box or wind
 

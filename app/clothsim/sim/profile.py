@@ -7,9 +7,9 @@ import time
 
 
 from ..colliders import kinds_text
-from .solvers.frame import PASS_COLLIDERS, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF
+from .solvers.frame import PASS_COLLIDERS, PASS_CONTACT, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF
 
-PASSES = ("forces+integrate", "self-collision", "colliders", "provot")
+PASSES = ("forces+integrate", "self-collision", "colliders", "provot", "contact bound")
 
 
 class Profiler:
@@ -72,11 +72,14 @@ class Profiler:
         sim = self.sim
         t = time.perf_counter
         n_colliders = sim.n_colliders
+        plan = sim._kernel_args
+        hashed = sim._self_mode != 0  # (the contact mode's response runs in this slot)
         for _ in range(steps):
             for name, bit, on in (("forces+integrate", PASS_INTEGRATE, True),
-                                  ("self-collision", PASS_SELF, sim._self_mode != 0),
+                                  ("self-collision", PASS_SELF, hashed),
                                   ("colliders", PASS_COLLIDERS, n_colliders > 0),
-                                  ("provot", PASS_PROVOT, sim._stretch_limit > 0)):
+                                  ("provot", PASS_PROVOT, sim._stretch_limit > 0),
+                                  ("contact bound", PASS_CONTACT, plan.contact is not None)):
                 if on:
                     before = sim.colliders_skipped
                     t0 = t()

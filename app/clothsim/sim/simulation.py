@@ -20,9 +20,12 @@ from .passes.colliders.moving import pack_motion, top_speed
 from .passes.colliders.shapes import collider_rows
 from .passes.colliders.meshgrid import mesh_group
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
+from .passes.contact import contact_group, response_reach
 from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash, Wind
 
-_SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID}
+#: The contact mode: a pass of its own (passes/contact.py), not a query of the hash.
+MODE_CONTACT = 3
+_SELF_MODES = {"off": 0, "spec": MODE_SPEC, "grid": MODE_GRID, "contact": MODE_CONTACT}
 _FRAMES = integer(ge=0)
 #: Rest length given to cut springs: no cloth stretches that far, and its square stays finite.
 CUT_REST = 1e30
@@ -92,6 +95,7 @@ class Simulation:
         self.colliders_skipped = 0
         # Extra per-run state of the non-spec integrators (e.g. velocities); None = start afresh.
         self.integrator_state: object = None
+        self._crossings_checked = False
         self._replan()
         self._place_pins()
 
@@ -264,12 +268,29 @@ class Simulation:
             grid = self.self_hash()
         if self._motion is not None:
             self._motion = self._motion._replace(dt=dt)
+        contact = self._contact_group()
         if self.n_colliders > 0:
             margin = 0.0 if self._self_mode == 0 else 1.001 * (2.0 * cloth.thickness) / steps
+            if contact is not None:
+                margin = 1.001 * response_reach(contact)
             col = Colliders(self.free, self._spheres, self._planes, SURFACE_OFFSET, self._box, self._sphere_on,
                             self._plane_on, self._boxes, margin, self._capsules, self._cuboids, self._capsule_on,
                             self._cuboid_on)
-        return Plan(st, spec, grid, col, self._motion, self._meshes, self._wind_group(), self._pin_group())
+        return Plan(st, spec, grid, col, self._motion, self._meshes, self._wind_group(), self._pin_group(),
+                    contact)
+
+    def _contact_group(self) -> tuple | None:
+        """The contact mode's group, kept across re-plans of the same cloth (its reference state
+        stays valid: a re-plan moves no point)."""
+        if self._self_mode != MODE_CONTACT:
+            return None
+        thickness = self.scene.cloth.thickness
+        old = getattr(self, "_contact", None)
+        if old is None or old[0] != thickness:
+            tris = triangles(self.nw, self.nh).astype(np.int64)
+            self._contact = (thickness, contact_group(np.ascontiguousarray(self.initial_positions.T), tris,
+                                                      ~self.pinned, thickness))
+        return self._contact[1]
 
     def self_hash(self) -> GridHash:
         """The self-collision hash's arrays and constants (the grid's group; the integrators'
@@ -339,6 +360,7 @@ class Simulation:
         self.frame = 0
         self.colliders_skipped = 0
         self.integrator_state = None
+        self._crossings_checked = False
         self._clock[:] = 0.0
         self._place_pins()
 
@@ -394,10 +416,31 @@ class Simulation:
             self.run_kernel(steps, PASS_ALL, 1)
 
     def _restore(self, saved: tuple) -> None:
+        self._forget_contacts()
         self._pos[...] = saved[0]
         self._last[...] = saved[1]
         self.integrator_state = None if saved[2] is None else saved[2].copy()
         self._clock[:] = saved[3]
+
+    def _forget_contacts(self) -> None:
+        # The contact pass rebuilds its reference at the first substep of every frame, so a frame
+        # depends only on the state it starts from: a replay (blow-up guard, team given up) gives
+        # the same bits.
+        contact = self._kernel_args.contact
+        if contact is not None:
+            contact.meta[0] = 0
+
+    def _check_crossings(self) -> None:
+        # once per start: the contact mode keeps a cloth from crossing itself, but cannot undo
+        # crossings it is given (positions set through the API)
+        self._crossings_checked = True
+        found = self.crossings()
+        if found:
+            import warnings
+
+            warnings.warn(f"self_collision \"contact\": the cloth starts with {found} self-crossing"
+                          f"{'s' if found != 1 else ''} (mesh edges through triangles); they are kept from "
+                          "growing, not undone", RuntimeWarning, stacklevel=4)
 
     def _advance_frame(self, run=None) -> None:  # noqa: ANN001
         """One frame through ``run(steps, saved)`` (default :meth:`_run`), under the blow-up guard."""
@@ -406,8 +449,11 @@ class Simulation:
         from .guard import sim_blow_up_reason
 
         run = run or self._run
+        if self._kernel_args.contact is not None and not self._crossings_checked:
+            self._check_crossings()
         state = self.integrator_state
         saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy(), self._clock.copy())
+        self._forget_contacts()
         steps = self.scene.simulation.simulation_steps
         run(steps, saved)
         if sim_blow_up_reason(self) is not None:

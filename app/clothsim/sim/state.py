@@ -136,7 +136,8 @@ class Corrections(NamedTuple):
     """The position corrections every integrator but the fast path runs after its advance
     (:func:`clothsim.sim.passes.corrections.corrections`): the pinned mask, the self-collision mode
     (0 = off) with its hash (a :class:`GridHash`, whichever the mode), Provot's limit (<= 0 = off),
-    and the colliders, moving-collider and mesh groups (each None when the scene has none)."""
+    the colliders, moving-collider and mesh groups (each None when the scene has none) and the
+    contact mode's group (None in every other mode)."""
 
     pinned: np.ndarray
     self_mode: int
@@ -145,6 +146,8 @@ class Corrections(NamedTuple):
     col: tuple | None
     mov: tuple | None
     mesh: tuple | None
+    #: the contact mode's group (:class:`clothsim.sim.passes.contact.Contact`), run after Provot; None otherwise
+    contact: tuple | None = None
 
 
 class Plan(NamedTuple):
@@ -159,3 +162,5 @@ class Plan(NamedTuple):
     mesh: tuple | None
     wind: Wind | None
     pins: PinMotion | None
+    #: the contact mode's group (:class:`clothsim.sim.passes.contact.Contact`)
+    contact: tuple | None = None

@@ -1,5 +1,6 @@
 """The position corrections every integrator shares, run after its update in the spec's order:
-self-collision -> colliders -> Provot.
+self-collision (or the contact mode's response) -> colliders -> Provot, then the contact mode's
+bound (last: no later pass may move a point past it).
 
 ``post`` is the :class:`~clothsim.sim.state.Corrections` group packed by
 :func:`clothsim.sim.solvers.post_args`, so the integrators' substep takes one argument for all of them.
@@ -16,6 +17,7 @@ from .provot import provot
 from .colliders import collide_reachable
 from .colliders.mesh import mesh_corrections
 from .selfcollide import self_collide
+from .contact import contact_bound, contact_respond
 from ..state import Corrections
 
 
@@ -32,10 +34,12 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
         h = post.hash
         self_collide(pos, free, h.thickness, h.sim_steps, post.self_mode, h.cell[0], h.cell[1], h.cell[2], h.keys,
                      h.slots, h.start, h.order)
+    contact_group(pos, last, post.contact, True)
     skipped += collide_group(pos, last, post.col, post.mov, substep)
     skipped += mesh_corrections(pos, last, free, post.mesh)
     if post.stretch_limit > 0.0:
         provot(pos, post.pinned, blocks, rest, nw, post.stretch_limit)
+    contact_group(pos, last, post.contact, False)
     return skipped
 
 
@@ -47,6 +51,19 @@ def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, mov: tup
     return collide_reachable(pos, last, col, mov, col.capsules, col.cuboids, substep)
 
 
+@njit(**EXACT)
+def contact_group(pos: np.ndarray, last: np.ndarray, contact: tuple | None, respond: bool) -> None:
+    """The contact mode's response (``respond``) or bound when on (``contact`` is not None: the
+    branch is pruned otherwise)."""
+    if contact is None:
+        return
+    if respond:
+        contact_respond(pos, last, contact)
+    else:
+        contact_bound(pos, contact)
+
+
 def has_corrections(post: Corrections) -> bool:
     """True when any correction pass is on (then velocities must be re-derived from positions)."""
-    return bool(post.self_mode != 0 or post.col is not None or post.stretch_limit > 0.0 or post.mesh is not None)
+    return bool(post.self_mode != 0 or post.col is not None or post.stretch_limit > 0.0 or post.mesh is not None
+                or post.contact is not None)

@@ -109,7 +109,10 @@ class IntegratorState:
 def post_args(sim: Any) -> Corrections:
     """The correction passes' group (:class:`~clothsim.sim.state.Corrections`)."""
     plan = sim._kernel_args
-    return Corrections(sim.pinned, sim._self_mode, sim.self_hash(), sim._stretch_limit, plan.col, plan.mov, plan.mesh)
+    # the contact mode is a pass of its own (plan.contact), not one of the hash's modes
+    mode = 0 if plan.contact is not None else sim._self_mode
+    return Corrections(sim.pinned, mode, sim.self_hash(), sim._stretch_limit, plan.col, plan.mov, plan.mesh,
+                       plan.contact)
 
 
 def state_of(sim: Any) -> IntegratorState:

@@ -41,19 +41,21 @@ from ..passes.pins import offset_at, pin_chunk
 from ..passes.colliders.moving import moving, update_poses
 from ..passes.colliders.shapes import flags_for
 from ..passes.colliders.mesh import collide_meshes_chunk, mesh_flags, reachable_meshes
+from ..passes.contact import contact_bound, contact_respond
 from ..passes.selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from ..state import Plan
 from ..team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
 
-#: Pass bits of :func:`run_substeps`: spring forces and Verlet, self-collision, colliders, Provot.
-PASS_INTEGRATE, PASS_SELF, PASS_COLLIDERS, PASS_PROVOT = 1, 2, 4, 8
-PASS_ALL = 15
+#: Pass bits of :func:`run_substeps`: spring forces and Verlet, self-collision, colliders, Provot,
+#: the contact mode's pass.
+PASS_INTEGRATE, PASS_SELF, PASS_COLLIDERS, PASS_PROVOT, PASS_CONTACT = 1, 2, 4, 8, 16
+PASS_ALL = 31
 
 
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
             col: tuple | None, mov: tuple | None, mesh: tuple | None, wind: tuple | None, pins: tuple | None,
-            sync: np.ndarray, passes: int) -> None:
+            contact: tuple | None, sync: np.ndarray, passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes.
 
     Returns early, with the state half-way through a substep, when a barrier reports that the
@@ -191,6 +193,14 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
+        if contact is not None:
+            if self_on:
+                # the contact response, where the hash's self-collision would be
+                if member == 0:
+                    contact_respond(pos, last, contact)
+                gen = barrier(sync, size, gen)
+                if gen < 0:
+                    return
         if col is not None:
             if colliders:
                 if posing:
@@ -236,6 +246,14 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             gen = barrier(sync, size, gen)
             if gen < 0:
                 return
+        if contact is not None:
+            # last in the substep: no later pass may move a point past the bound
+            if passes & PASS_CONTACT != 0:
+                if member == 0:
+                    contact_bound(pos, contact)
+                gen = barrier(sync, size, gen)
+                if gen < 0:
+                    return
 
 
 @lru_cache(maxsize=None)
@@ -289,11 +307,11 @@ def kernel_addresses(plan: Plan, sync: np.ndarray) -> tuple[int, int, int]:
 
 @njit(**PARALLEL)
 def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
-                 mov: tuple | None, mesh: tuple | None, wind: tuple | None, pins: tuple | None, sync: np.ndarray,
-                 size: int, passes: int, member: int) -> int:
+                 mov: tuple | None, mesh: tuple | None, wind: tuple | None, pins: tuple | None,
+                 contact: tuple | None, sync: np.ndarray, size: int, passes: int, member: int) -> int:
     """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
 
-    ``st``, ``spec``, ``grid``, ``col``, ``wind`` and ``pins`` are the named tuples of
+    ``st``, ``spec``, ``grid``, ``col``, ``wind``, ``pins`` and ``contact`` are the named tuples of
     :mod:`clothsim.sim.state`, ``mov`` the tracks of moving colliders
     (:class:`clothsim.sim.passes.colliders.moving.Motion`) and ``mesh`` the
     :class:`~clothsim.sim.passes.colliders.meshgrid.MeshGroup`; all but ``st`` are ``None`` for a pass the scene
@@ -315,7 +333,7 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
             me = 0
             if working == size:
                 me = np.int64(m)
-            if call_native(member, (me, working, steps, st, spec, grid, col, mov, mesh, wind, pins, sync, passes)) != 0:
+            if call_native(member, (me, working, steps, st, spec, grid, col, mov, mesh, wind, pins, contact, sync, passes)) != 0:
                 sync[FAILED] = 1
                 atomic_cas(sync, ABORT, 0, 1)
     return st.skips[0]

@@ -1,0 +1,687 @@
+"""Self-collision by contact (``simulation.self_collision: "contact"``): point-triangle and
+edge-edge proximity, repulsion with friction, and a conservative displacement bound that lets no
+element pass through another over a substep's whole motion. It is two passes of the substep: the
+response in the self-collision slot (before the colliders, so that they have the last word on a
+point the response pushed into them) and the bound at the very end (after Provot: no later pass
+may move a point past it).
+
+The method is the displacement bound of Vertex Block Descent and Offset Geometric Contact (Chen
+et al. 2024, 2025): from a crossing-free reference state, every point gets a ball of radius
+``GAMMA`` (< 1/2) times its distance to the nearest element it does not belong to (point-triangle
+and edge-edge, both ways, within the query radius). A state in which every point lies in its ball
+is crossing-free, and so is every state on the straight path from the reference to it (a ball is
+convex): two elements at distance d each move less than d/2. In each substep:
+
+1. (self-collision slot) if any point's position at the substep's start has left its ball, or
+   its position after the integrator would (for a point whose ball is not tiny: ROOMY), the
+   reference is rebuilt from the positions the substep started from (crossing-free, by the same
+   argument), and at the first substep of every frame;
+2. (self-collision slot) every stored pair closer than the contact distance is pushed apart along its reference normal
+   (inelastically, plus a fraction of the overlap), with Coulomb friction on the pair's relative
+   tangential motion; corrections are averaged per point (Jacobi, in pair order);
+3. (after Provot) every free point is projected into its ball: on the segment from its
+   reference, so a point that a convex collider left outside stays outside when its reference
+   is outside too. Pinned points are never moved; their balls are
+   checked in step 1 like every other point's.
+
+The broad phase hashes the axis-aligned boxes of the points, edges and triangles (each widened by
+half the query radius) into a uniform grid of cells, every box into every cell it overlaps, and
+tests a pair only in the one cell that holds the lower corner of the two boxes' intersection.
+It runs at a rebuild only: between rebuilds a substep costs three passes over the points and one
+over the stored pairs.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from ...jit import EXACT, KERNEL
+from .selfcollide import _cell_key
+
+#: Fraction of the distance to the nearest other element a point may move from its reference.
+GAMMA = 0.45
+#: Fraction of the remaining overlap a contact removes per substep beyond stopping the approach.
+PUSH = 0.1
+#: Cloth-on-cloth Coulomb friction coefficient.
+FRICTION = 0.3
+#: The contact distance is at most this fraction of the shortest rest edge: a flat cloth's own
+#: non-adjacent elements lie 0.7 edge apart, and a thicker contact would push the sheet from itself.
+MAX_THICKNESS_PER_EDGE = 0.5
+#: Query radius over the contact distance.
+REACH = 1.5
+#: A point about to leave its ball calls for a new reference only if its ball is at least this
+#: fraction of the largest (GAMMA x the query radius): a point held a hair from another element
+#: would otherwise rebuild every substep and gain nothing; it waits, clamped, for the next rebuild
+#: (at the latest the next frame's first substep).
+ROOMY = 0.25
+
+# meta fields
+VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE = 0, 1, 2, 3, 4, 5
+META = 6
+
+
+class Contact(NamedTuple):
+    """The contact pass's arrays: the mesh (triangles (3, T), edges (2, E)), the movable mask, the
+    reference state (3, N) and each point's squared ball radius, the stored pairs (point-triangle:
+    indices (2, P) and weights + normal (6, P); edge-edge: indices (2, Q) and parameters + normal
+    (5, Q)), the Jacobi sums, ``meta`` counters (see VALID ... UNSAFE), the contact distance, the
+    query radius and the broad phase's cell edge."""
+
+    tris: np.ndarray
+    edges: np.ndarray
+    movable: np.ndarray
+    ref: np.ndarray
+    rho2: np.ndarray
+    pt: np.ndarray
+    ptf: np.ndarray
+    ee: np.ndarray
+    eef: np.ndarray
+    acc: np.ndarray
+    cnt: np.ndarray
+    meta: np.ndarray
+    thickness: float
+    radius: float
+    cell: float
+
+
+def mesh_edges(tris: np.ndarray) -> np.ndarray:
+    """The unique edges (2, E) int64 of triangles (3, T), lower index first, sorted."""
+    t = tris.astype(np.int64)
+    e = np.concatenate([t[[0, 1]], t[[1, 2]], t[[2, 0]]], axis=1)
+    e = np.sort(e, axis=0)
+    e = np.unique(e.T, axis=0).T
+    return np.ascontiguousarray(e)
+
+
+def contact_group(pos: np.ndarray, tris: np.ndarray, movable: np.ndarray, thickness: float) -> Contact:
+    """The pass's group for a cloth at rest positions ``pos`` (3, N) with triangles ``tris``."""
+    tris = np.ascontiguousarray(tris, dtype=np.int64)
+    edges = mesh_edges(tris)
+    lengths = np.sqrt(((pos[:, edges[0]] - pos[:, edges[1]]) ** 2).sum(axis=0))
+    shortest = float(lengths[lengths > 0].min()) if (lengths > 0).any() else thickness
+    h = min(thickness, MAX_THICKNESS_PER_EDGE * shortest)
+    radius = REACH * h
+    n = pos.shape[1]
+    cap = 16 * n + 64
+    return Contact(tris, edges, np.ascontiguousarray(movable, dtype=np.bool_), np.zeros((3, n)), np.zeros(n),
+                   np.zeros((2, cap), dtype=np.int64), np.zeros((6, cap)), np.zeros((2, cap), dtype=np.int64),
+                   np.zeros((5, cap)), np.zeros((3, n)), np.zeros(n, dtype=np.int64), np.zeros(META, dtype=np.int64),
+                   h, radius, max(radius, 2.0 * float(np.median(lengths))))
+
+
+# ------------------------------------------------------------------------------------------------
+# closest points
+
+
+@njit(inline="always", **KERNEL)
+def closest_on_triangle(px: float, py: float, pz: float, ax: float, ay: float, az: float, bx: float, by: float,
+                        bz: float, cx: float, cy: float, cz: float) -> tuple[float, float, float]:
+    """Barycentric weights of the point of triangle abc nearest to p (Ericson, Real-Time
+    Collision Detection, 5.1.5)."""
+    abx, aby, abz = bx - ax, by - ay, bz - az
+    acx, acy, acz = cx - ax, cy - ay, cz - az
+    apx, apy, apz = px - ax, py - ay, pz - az
+    d1 = abx * apx + aby * apy + abz * apz
+    d2 = acx * apx + acy * apy + acz * apz
+    if d1 <= 0.0 and d2 <= 0.0:
+        return 1.0, 0.0, 0.0
+    bpx, bpy, bpz = px - bx, py - by, pz - bz
+    d3 = abx * bpx + aby * bpy + abz * bpz
+    d4 = acx * bpx + acy * bpy + acz * bpz
+    if d3 >= 0.0 and d4 <= d3:
+        return 0.0, 1.0, 0.0
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
+        v = d1 / (d1 - d3)
+        return 1.0 - v, v, 0.0
+    cpx, cpy, cpz = px - cx, py - cy, pz - cz
+    d5 = abx * cpx + aby * cpy + abz * cpz
+    d6 = acx * cpx + acy * cpy + acz * cpz
+    if d6 >= 0.0 and d5 <= d6:
+        return 0.0, 0.0, 1.0
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:
+        w = d2 / (d2 - d6)
+        return 1.0 - w, 0.0, w
+    va = d3 * d6 - d5 * d4
+    if va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return 0.0, 1.0 - w, w
+    denom = 1.0 / (va + vb + vc)
+    v = vb * denom
+    w = vc * denom
+    return 1.0 - v - w, v, w
+
+
+@njit(inline="always", **KERNEL)
+def _clamp01(x: float) -> float:
+    return min(max(x, 0.0), 1.0)
+
+
+@njit(inline="always", **KERNEL)
+def closest_on_segments(p1x: float, p1y: float, p1z: float, q1x: float, q1y: float, q1z: float, p2x: float,
+                        p2y: float, p2z: float, q2x: float, q2y: float, q2z: float) -> tuple[float, float]:
+    """Parameters (s, t) of the closest points p1 + s (q1 - p1), p2 + t (q2 - p2) of two segments
+    (Ericson 5.1.9)."""
+    d1x, d1y, d1z = q1x - p1x, q1y - p1y, q1z - p1z
+    d2x, d2y, d2z = q2x - p2x, q2y - p2y, q2z - p2z
+    rx, ry, rz = p1x - p2x, p1y - p2y, p1z - p2z
+    a = d1x * d1x + d1y * d1y + d1z * d1z
+    e = d2x * d2x + d2y * d2y + d2z * d2z
+    f = d2x * rx + d2y * ry + d2z * rz
+    eps = 1e-30
+    if a <= eps and e <= eps:
+        return 0.0, 0.0
+    if a <= eps:
+        return 0.0, _clamp01(f / e)
+    c = d1x * rx + d1y * ry + d1z * rz
+    if e <= eps:
+        return _clamp01(-c / a), 0.0
+    b = d1x * d2x + d1y * d2y + d1z * d2z
+    denom = a * e - b * b
+    s = 0.0
+    if denom > 0.0:
+        s = _clamp01((b * f - c * e) / denom)
+    t = (b * s + f) / e
+    if t < 0.0:
+        return _clamp01(-c / a), 0.0
+    if t > 1.0:
+        return _clamp01((b - c) / a), 1.0
+    return s, t
+
+
+# ------------------------------------------------------------------------------------------------
+# broad phase
+
+
+@njit(**KERNEL)
+def _boxes(x: np.ndarray, tris: np.ndarray, edges: np.ndarray, pad: float) -> np.ndarray:
+    """(6, N + E + T) boxes (lo, hi) of the points, edges and triangles, widened by ``pad``."""
+    n = x.shape[1]
+    ne = edges.shape[1]
+    nt = tris.shape[1]
+    box = np.empty((6, n + ne + nt))
+    for ax in range(3):
+        for p in range(n):
+            box[ax, p] = x[ax, p] - pad
+            box[3 + ax, p] = x[ax, p] + pad
+        for e in range(ne):
+            a = x[ax, edges[0, e]]
+            b = x[ax, edges[1, e]]
+            box[ax, n + e] = min(a, b) - pad
+            box[3 + ax, n + e] = max(a, b) + pad
+        for t in range(nt):
+            a = x[ax, tris[0, t]]
+            b = x[ax, tris[1, t]]
+            c = x[ax, tris[2, t]]
+            box[ax, n + ne + t] = min(a, min(b, c)) - pad
+            box[3 + ax, n + ne + t] = max(a, max(b, c)) + pad
+    return box
+
+
+@njit(inline="always", **KERNEL)
+def _cell(v: float, inv: float) -> np.int64:
+    return np.int64(np.floor(v * inv))
+
+
+@njit(inline="always", **KERNEL)
+def _slot_of(key: np.int64, mask: np.uint64) -> np.int64:
+    return np.int64(((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(32)) & mask)
+
+
+@njit(**KERNEL)
+def cell_table(box: np.ndarray, cell: float) -> tuple:
+    """Every box in every cell it overlaps, counting-sorted by hash slot: (start (table + 1,),
+    element id, cell key), both in slot order."""
+    m = box.shape[1]
+    inv = 1.0 / cell
+    total = 0
+    for k in range(m):
+        nx = _cell(box[3, k], inv) - _cell(box[0, k], inv) + 1
+        ny = _cell(box[4, k], inv) - _cell(box[1, k], inv) + 1
+        nz = _cell(box[5, k], inv) - _cell(box[2, k], inv) + 1
+        total += nx * ny * nz
+    table = 1
+    while table < 2 * total:
+        table *= 2
+    mask = np.uint64(table - 1)
+    keys = np.empty(total, dtype=np.int64)
+    ids = np.empty(total, dtype=np.int64)
+    start = np.zeros(table + 1, dtype=np.int64)
+    i = 0
+    for k in range(m):
+        x0, x1 = _cell(box[0, k], inv), _cell(box[3, k], inv)
+        y0, y1 = _cell(box[1, k], inv), _cell(box[4, k], inv)
+        z0, z1 = _cell(box[2, k], inv), _cell(box[5, k], inv)
+        for ix in range(x0, x1 + 1):
+            for iy in range(y0, y1 + 1):
+                for iz in range(z0, z1 + 1):
+                    key = _cell_key(ix, iy, iz)
+                    keys[i] = key
+                    ids[i] = k
+                    start[_slot_of(key, mask)] += 1
+                    i += 1
+    acc = 0
+    for s in range(table):
+        c = start[s]
+        start[s] = acc
+        acc += c
+    start[table] = acc
+    skeys = np.empty(total, dtype=np.int64)
+    sids = np.empty(total, dtype=np.int64)
+    cursor = start[:table].copy()
+    for j in range(total):
+        s = _slot_of(keys[j], mask)
+        skeys[cursor[s]] = keys[j]
+        sids[cursor[s]] = ids[j]
+        cursor[s] += 1
+    return start, sids, skeys
+
+
+@njit(**KERNEL)
+def corner_table(box: np.ndarray, cell: float) -> tuple:
+    """Every box once, in the cell of its lower corner, counting-sorted by hash slot: (start
+    (table + 1,), element id, cell key), both in slot order. With cells no smaller than any box,
+    the boxes that overlap box b have their lower corner in the cells from b's lower corner's
+    minus one to its upper corner's, along each axis."""
+    m = box.shape[1]
+    inv = 1.0 / cell
+    table = 1
+    while table < 2 * m:
+        table *= 2
+    mask = np.uint64(table - 1)
+    keys = np.empty(m, dtype=np.int64)
+    start = np.zeros(table + 1, dtype=np.int64)
+    for k in range(m):
+        key = _cell_key(_cell(box[0, k], inv), _cell(box[1, k], inv), _cell(box[2, k], inv))
+        keys[k] = key
+        start[_slot_of(key, mask)] += 1
+    acc = 0
+    for s in range(table):
+        c = start[s]
+        start[s] = acc
+        acc += c
+    start[table] = acc
+    skeys = np.empty(m, dtype=np.int64)
+    sids = np.empty(m, dtype=np.int64)
+    cursor = start[:table].copy()
+    for k in range(m):
+        s = _slot_of(keys[k], mask)
+        skeys[cursor[s]] = keys[k]
+        sids[cursor[s]] = k
+        cursor[s] += 1
+    return start, sids, skeys
+
+
+@njit(inline="always", **KERNEL)
+def _first_cell(box: np.ndarray, a: int, b: int, inv: float) -> np.int64:
+    """Key of the cell holding the lower corner of boxes a and b's intersection, or -1 when they
+    do not overlap."""
+    lx = max(box[0, a], box[0, b])
+    ly = max(box[1, a], box[1, b])
+    lz = max(box[2, a], box[2, b])
+    if lx > min(box[3, a], box[3, b]) or ly > min(box[4, a], box[4, b]) or lz > min(box[5, a], box[5, b]):
+        return np.int64(-1)
+    return _cell_key(_cell(lx, inv), _cell(ly, inv), _cell(lz, inv))
+
+
+# ------------------------------------------------------------------------------------------------
+# the reference state
+
+
+@njit(inline="always", **KERNEL)
+def _point_triangle(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray, npt: int) -> int:
+    """Test one point-triangle pair; returns the pairs stored (npt, or npt + 1)."""
+    tris = c.tris
+    a, b, cc = tris[0, t], tris[1, t], tris[2, t]
+    if p == a or p == b or p == cc:
+        return npt
+    wa, wb, wc = closest_on_triangle(x[0, p], x[1, p], x[2, p], x[0, a], x[1, a], x[2, a], x[0, b],
+                                     x[1, b], x[2, b], x[0, cc], x[1, cc], x[2, cc])
+    nx = x[0, p] - (wa * x[0, a] + wb * x[0, b] + wc * x[0, cc])
+    ny = x[1, p] - (wa * x[1, a] + wb * x[1, b] + wc * x[1, cc])
+    nz = x[2, p] - (wa * x[2, a] + wb * x[2, b] + wc * x[2, cc])
+    d = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if d >= c.radius:
+        return npt
+    dmin[p] = min(dmin[p], d)
+    dmin[a] = min(dmin[a], d)
+    dmin[b] = min(dmin[b], d)
+    dmin[cc] = min(dmin[cc], d)
+    # (a pair further than the contact distance only bounds the motion; the response would skip it)
+    if 0.0 < d < c.thickness:
+        if npt < c.pt.shape[1]:
+            c.pt[0, npt] = p
+            c.pt[1, npt] = t
+            c.ptf[0, npt] = wa
+            c.ptf[1, npt] = wb
+            c.ptf[2, npt] = wc
+            c.ptf[3, npt] = nx / d
+            c.ptf[4, npt] = ny / d
+            c.ptf[5, npt] = nz / d
+            return npt + 1
+        c.meta[DROPPED] += 1
+    return npt
+
+
+@njit(inline="always", **KERNEL)
+def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, nee: int) -> int:
+    """Test one edge-edge pair; returns the pairs stored."""
+    edges = c.edges
+    p1, q1 = edges[0, e1], edges[1, e1]
+    p2, q2 = edges[0, e2], edges[1, e2]
+    if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
+        return nee
+    u, v = closest_on_segments(x[0, p1], x[1, p1], x[2, p1], x[0, q1], x[1, q1], x[2, q1], x[0, p2],
+                               x[1, p2], x[2, p2], x[0, q2], x[1, q2], x[2, q2])
+    nx = (x[0, p1] + u * (x[0, q1] - x[0, p1])) - (x[0, p2] + v * (x[0, q2] - x[0, p2]))
+    ny = (x[1, p1] + u * (x[1, q1] - x[1, p1])) - (x[1, p2] + v * (x[1, q2] - x[1, p2]))
+    nz = (x[2, p1] + u * (x[2, q1] - x[2, p1])) - (x[2, p2] + v * (x[2, q2] - x[2, p2]))
+    d = np.sqrt(nx * nx + ny * ny + nz * nz)
+    if d >= c.radius:
+        return nee
+    dmin[p1] = min(dmin[p1], d)
+    dmin[q1] = min(dmin[q1], d)
+    dmin[p2] = min(dmin[p2], d)
+    dmin[q2] = min(dmin[q2], d)
+    if 0.0 < d < c.thickness:
+        if nee < c.ee.shape[1]:
+            c.ee[0, nee] = e1
+            c.ee[1, nee] = e2
+            c.eef[0, nee] = u
+            c.eef[1, nee] = v
+            c.eef[2, nee] = nx / d
+            c.eef[3, nee] = ny / d
+            c.eef[4, nee] = nz / d
+            return nee + 1
+        c.meta[DROPPED] += 1
+    return nee
+
+
+@njit(**KERNEL)
+def _element_boxes(x: np.ndarray, ids: np.ndarray, pad: float) -> np.ndarray:
+    """(6, K) boxes (lo, hi) of the elements whose corners are the columns of ``ids`` (k, K),
+    widened by ``pad``."""
+    m = ids.shape[1]
+    box = np.empty((6, m))
+    for ax in range(3):
+        for e in range(m):
+            lo = x[ax, ids[0, e]]
+            hi = lo
+            for k in range(1, ids.shape[0]):
+                v = x[ax, ids[k, e]]
+                lo = min(lo, v)
+                hi = max(hi, v)
+            box[ax, e] = lo - pad
+            box[3 + ax, e] = hi + pad
+    return box
+
+
+@njit(**KERNEL)
+def rebuild(x: np.ndarray, c: Contact) -> None:
+    """Make ``x`` (3, N) the reference: find every point-triangle and edge-edge pair closer than
+    the query radius, store them, and give each point its ball.
+
+    Point-triangle: the triangles' boxes, widened by the radius, go into every cell they overlap;
+    each point reads its own cell (a triangle is listed once per cell: no pair twice). Edge-edge:
+    each edge's box, widened by half the radius, goes once into the cell of its lower corner
+    (cells at least as large as every box); each edge reads the cells where an overlapping box
+    can have its lower corner and tests the later edges found there.
+    """
+    n = x.shape[1]
+    radius = c.radius
+    c.ref[:, :] = x
+    dmin = np.full(n, radius)
+    inv = 1.0 / c.cell
+    npt = 0
+    nee = 0
+    # point-triangle
+    tbox = _element_boxes(x, c.tris, radius)
+    start, ids, keys = cell_table(tbox, c.cell)
+    mask = np.uint64(start.shape[0] - 2)
+    for p in range(n):
+        key = _cell_key(_cell(x[0, p], inv), _cell(x[1, p], inv), _cell(x[2, p], inv))
+        s = _slot_of(key, mask)
+        for i in range(start[s], start[s + 1]):
+            if keys[i] != key:
+                continue
+            t = ids[i]
+            if (x[0, p] < tbox[0, t] or x[0, p] > tbox[3, t] or x[1, p] < tbox[1, t] or x[1, p] > tbox[4, t]
+                    or x[2, p] < tbox[2, t] or x[2, p] > tbox[5, t]):
+                continue
+            npt = _point_triangle(x, c, p, t, dmin, npt)
+    # edge-edge: each edge once, in its lower corner's cell (cells as large as the largest box)
+    ebox = _element_boxes(x, c.edges, 0.5 * radius)
+    ne = ebox.shape[1]
+    ecell = c.cell
+    for e in range(ne):
+        ecell = max(ecell, ebox[3, e] - ebox[0, e], ebox[4, e] - ebox[1, e], ebox[5, e] - ebox[2, e])
+    einv = 1.0 / ecell
+    start, ids, keys = corner_table(ebox, ecell)
+    mask = np.uint64(start.shape[0] - 2)
+    for e1 in range(ne):
+        x0, x1 = _cell(ebox[0, e1], einv) - 1, _cell(ebox[3, e1], einv)
+        y0, y1 = _cell(ebox[1, e1], einv) - 1, _cell(ebox[4, e1], einv)
+        z0, z1 = _cell(ebox[2, e1], einv) - 1, _cell(ebox[5, e1], einv)
+        for ix in range(x0, x1 + 1):
+            for iy in range(y0, y1 + 1):
+                for iz in range(z0, z1 + 1):
+                    key = _cell_key(ix, iy, iz)
+                    s = _slot_of(key, mask)
+                    for i in range(start[s], start[s + 1]):
+                        e2 = ids[i]
+                        if e2 <= e1 or keys[i] != key:
+                            continue
+                        if (ebox[0, e2] > ebox[3, e1] or ebox[3, e2] < ebox[0, e1] or ebox[1, e2] > ebox[4, e1]
+                                or ebox[4, e2] < ebox[1, e1] or ebox[2, e2] > ebox[5, e1]
+                                or ebox[5, e2] < ebox[2, e1]):
+                            continue
+                        nee = _edge_edge(x, c, e1, e2, dmin, nee)
+    for p in range(n):
+        r = GAMMA * dmin[p]
+        c.rho2[p] = r * r
+    c.meta[VALID] = 1
+    c.meta[N_PT] = npt
+    c.meta[N_EE] = nee
+    c.meta[REBUILDS] += 1
+
+
+@njit(**KERNEL)
+def _leaving(x: np.ndarray, c: Contact) -> bool:
+    """True when a point with a roomy ball (see ROOMY) lies outside it in ``x``."""
+    ref = c.ref
+    rho2 = c.rho2
+    roomy = (ROOMY * GAMMA * c.radius) ** 2
+    for p in range(x.shape[1]):
+        if rho2[p] < roomy:
+            continue
+        dx = x[0, p] - ref[0, p]
+        dy = x[1, p] - ref[1, p]
+        dz = x[2, p] - ref[2, p]
+        if dx * dx + dy * dy + dz * dz > rho2[p]:
+            return True
+    return False
+
+
+@njit(**KERNEL)
+def _outside(x: np.ndarray, c: Contact) -> bool:
+    """True when a point of ``x`` lies outside its ball (by more than rounding: a ball of a few
+    nanometres, next to an element the cloth was given crossing, is placed to 1e-16 m)."""
+    ref = c.ref
+    rho2 = c.rho2
+    for p in range(x.shape[1]):
+        dx = x[0, p] - ref[0, p]
+        dy = x[1, p] - ref[1, p]
+        dz = x[2, p] - ref[2, p]
+        if dx * dx + dy * dy + dz * dz > rho2[p] * (1.0 + 1e-6) + 1e-28:
+            return True
+    return False
+
+
+# ------------------------------------------------------------------------------------------------
+# contact response
+
+
+@njit(inline="always", **KERNEL)
+def _respond(pos: np.ndarray, last: np.ndarray, c: Contact, ids: np.ndarray, coef: np.ndarray, nx: float, ny: float,
+             nz: float, h: float) -> None:
+    """One pair's response: ``ids`` its four points, ``coef`` their signed weights (the pair's
+    separation is sum coef_k x_k along n); pushes the pair apart towards ``h`` with friction."""
+    s_now = 0.0
+    s_last = 0.0
+    for k in range(4):
+        q = ids[k]
+        s_now += coef[k] * (pos[0, q] * nx + pos[1, q] * ny + pos[2, q] * nz)
+        s_last += coef[k] * (last[0, q] * nx + last[1, q] * ny + last[2, q] * nz)
+    if s_now >= h:
+        return
+    # inelastic: no closer than at the substep's start (or the contact distance), then part of
+    # what overlap is left
+    base = max(s_now, min(s_last, h))
+    delta = base + PUSH * (h - base) - s_now
+    den = 0.0
+    for k in range(4):
+        if c.movable[ids[k]]:
+            den += coef[k] * coef[k]
+    if den <= 0.0 or delta <= 0.0:
+        return
+    imp = delta / den
+    # relative tangential motion over the substep, reduced by up to friction x the normal push
+    ux = 0.0
+    uy = 0.0
+    uz = 0.0
+    for k in range(4):
+        q = ids[k]
+        ux += coef[k] * (pos[0, q] - last[0, q])
+        uy += coef[k] * (pos[1, q] - last[1, q])
+        uz += coef[k] * (pos[2, q] - last[2, q])
+    un = ux * nx + uy * ny + uz * nz
+    ux -= un * nx
+    uy -= un * ny
+    uz -= un * nz
+    ut = np.sqrt(ux * ux + uy * uy + uz * uz)
+    fx = 0.0
+    fy = 0.0
+    fz = 0.0
+    if ut > 0.0:
+        j = min(ut, FRICTION * delta) / (den * ut)
+        fx, fy, fz = ux * j, uy * j, uz * j
+    for k in range(4):
+        q = ids[k]
+        if c.movable[q] and coef[k] != 0.0:
+            c.acc[0, q] += coef[k] * (imp * nx - fx)
+            c.acc[1, q] += coef[k] * (imp * ny - fy)
+            c.acc[2, q] += coef[k] * (imp * nz - fz)
+            c.cnt[q] += 1
+
+
+@njit(**KERNEL)
+def respond(pos: np.ndarray, last: np.ndarray, c: Contact) -> None:
+    """Every stored pair's response, averaged per point and applied (Jacobi)."""
+    ids = np.empty(4, dtype=np.int64)
+    coef = np.empty(4)
+    h = c.thickness
+    tris = c.tris
+    edges = c.edges
+    for k in range(c.meta[N_PT]):
+        t = c.pt[1, k]
+        ids[0] = c.pt[0, k]
+        ids[1] = tris[0, t]
+        ids[2] = tris[1, t]
+        ids[3] = tris[2, t]
+        coef[0] = 1.0
+        coef[1] = -c.ptf[0, k]
+        coef[2] = -c.ptf[1, k]
+        coef[3] = -c.ptf[2, k]
+        _respond(pos, last, c, ids, coef, c.ptf[3, k], c.ptf[4, k], c.ptf[5, k], h)
+    for k in range(c.meta[N_EE]):
+        e1 = c.ee[0, k]
+        e2 = c.ee[1, k]
+        u = c.eef[0, k]
+        v = c.eef[1, k]
+        ids[0] = edges[0, e1]
+        ids[1] = edges[1, e1]
+        ids[2] = edges[0, e2]
+        ids[3] = edges[1, e2]
+        coef[0] = 1.0 - u
+        coef[1] = u
+        coef[2] = v - 1.0
+        coef[3] = -v
+        _respond(pos, last, c, ids, coef, c.eef[2, k], c.eef[3, k], c.eef[4, k], h)
+    for p in range(pos.shape[1]):
+        m = c.cnt[p]
+        if m > 0:
+            inv = 1.0 / m
+            pos[0, p] += c.acc[0, p] * inv
+            pos[1, p] += c.acc[1, p] * inv
+            pos[2, p] += c.acc[2, p] * inv
+            c.acc[0, p] = 0.0
+            c.acc[1, p] = 0.0
+            c.acc[2, p] = 0.0
+            c.cnt[p] = 0
+
+
+@njit(**KERNEL)
+def bound(pos: np.ndarray, c: Contact) -> None:
+    """Project every free point into its ball (pinned points are never moved)."""
+    ref = c.ref
+    rho2 = c.rho2
+    for p in range(pos.shape[1]):
+        if not c.movable[p]:
+            continue
+        dx = pos[0, p] - ref[0, p]
+        dy = pos[1, p] - ref[1, p]
+        dz = pos[2, p] - ref[2, p]
+        r2 = dx * dx + dy * dy + dz * dz
+        if r2 > rho2[p]:
+            # (a hair inside, so rounding does not leave it outside and force a rebuild)
+            f = np.sqrt(rho2[p] / r2) * (1.0 - 1e-9)
+            pos[0, p] = ref[0, p] + dx * f
+            pos[1, p] = ref[1, p] + dy * f
+            pos[2, p] = ref[2, p] + dz * f
+
+
+@njit(**EXACT)
+def contact_respond(pos: np.ndarray, last: np.ndarray, c: Contact) -> None:
+    """The first half of the pass, in the self-collision slot of a substep that started at
+    ``last``: rebuild the reference if a point has left its ball, then push the pairs apart."""
+    if c.meta[VALID] == 0 or _outside(last, c) or _leaving(pos, c):
+        rebuild(last, c)
+        # a pinned point that moved further than its ball in this one substep: the bound cannot
+        # hold for its pairs (the pin's motion is prescribed); counted, not hidden
+        for p in range(pos.shape[1]):
+            if not c.movable[p]:
+                dx = pos[0, p] - c.ref[0, p]
+                dy = pos[1, p] - c.ref[1, p]
+                dz = pos[2, p] - c.ref[2, p]
+                if dx * dx + dy * dy + dz * dz > c.rho2[p]:
+                    c.meta[UNSAFE] += 1
+                    break
+    respond(pos, last, c)
+
+
+@njit(**EXACT)
+def contact_bound(pos: np.ndarray, c: Contact) -> None:
+    """The second half, last in the substep: every free point into its ball."""
+    bound(pos, c)
+
+
+def response_reach(c: Contact) -> float:
+    """The furthest the response moves a point in one substep: an average of pushes of at most
+    the contact distance (plus friction), over a weight sum of at least 1/2."""
+    return 2.0 * (1.0 + FRICTION) * c.thickness
+
+
+# ------------------------------------------------------------------------------------------------
+# crossings (for the warning about a cloth that starts crossed)
+
+
+@njit(inline="always", **KERNEL)
+def _volume(a: int, b: int, c: int, d: int, x: np.ndarray) -> float:
+    ux, uy, uz = x[0, b] - x[0, a], x[1, b] - x[1, a], x[2, b] - x[2, a]
+    vx, vy, vz = x[0, c] - x[0, a], x[1, c] - x[1, a], x[2, c] - x[2, a]
+    wx, wy, wz = x[0, d] - x[0, a], x[1, d] - x[1, a], x[2, d] - x[2, a]
+    return (uy * vz - uz * vy) * wx + (uz * vx - ux * vz) * wy + (ux * vy - uy * vx) * wz

@@ -1,0 +1,192 @@
+"""The contact self-collision mode: no crossings at the end of any frame, with every integrator,
+on the stress scenes scaled down; pinned points untouched; the same bits twice; a cloth that
+starts crossed is warned about and gains no crossings.
+
+Crossings are counted by the project's exact counter (:mod:`clothsim.sim.crossings`, itself checked
+against brute force in tests/test_crossings.py), independently of the pass.
+"""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numba
+import numpy as np
+import pytest
+
+from clothsim.errors import SceneError
+from clothsim.scene import load_scene, scene_from_dict
+from clothsim.sim import Simulation
+from clothsim.sim.profile import Profiler
+from clothsim.sim.solvers.frame import PASS_ALL
+
+from clothsim.sim.crossings import count_crossings
+
+SCENES = Path(__file__).resolve().parents[1] / "scenes"
+INTEGRATIONS = [("verlet", "spec"), ("verlet", "rate"), ("symplectic_euler", "spec"), ("implicit_euler", "spec"),
+                ("xpbd", "spec")]
+
+
+def self_collision_scene(n: int = 22, integrator: str = "verlet", damping: str = "spec", mode: str = "contact"):
+    return load_scene(SCENES / "selfCollision.json").with_cloth(num_width_points=n, num_height_points=n) \
+        .with_simulation(self_collision=mode, integrator=integrator, damping_mode=damping)
+
+
+def flag_scene(nw: int = 27, nh: int = 18, mode: str = "contact"):
+    raw = {"cloth": {"width": 1.5, "height": 1.0, "num_width_points": nw, "num_height_points": nh, "thickness": 0.01,
+                     "orientation": "vertical", "pinned": [[0, j] for j in range(nh)], "damping": 0.05,
+                     "density": 0.5, "ks": 300.0},
+           "wind": {"velocity": [6.0, 0.0, 0.0], "turbulence": 3.0, "drag": 1.0, "lift": 0.3, "air_density": 1.2,
+                    "seed": 7, "turbulence_scale": 2.0},
+           "simulation": {"self_collision": mode}}
+    return scene_from_dict(raw)
+
+
+def crossings_per_frame(sim: Simulation, frames: int) -> tuple[list[int], int]:
+    """Crossings at the end of each frame, and the most contact pairs the pass stored."""
+    out = []
+    pairs = 0
+    for _ in range(frames):
+        sim.step(1)
+        out.append(count_crossings(sim.positions, sim.nw, sim.nh))
+        c = sim._kernel_args.contact
+        pairs = max(pairs, int(c.meta[1] + c.meta[2]))
+    return out, pairs
+
+
+@pytest.mark.parametrize("integrator,damping", INTEGRATIONS)
+def test_self_collision_scene_never_crosses(integrator: str, damping: str) -> None:
+    sim = Simulation(self_collision_scene(22, integrator, damping))
+    counts, pairs = crossings_per_frame(sim, 75)
+    assert counts == [0] * len(counts)
+    assert pairs > 0  # the cloth did fold onto itself
+    assert np.isfinite(sim.positions).all()
+    assert sim.positions[:, 1].min() > -1e-3  # and stays on the floor
+
+
+def test_spec_mode_crosses_on_the_same_scene() -> None:
+    """The scene is a real stress test: the spec's hash lets the same cloth cross itself."""
+    sim = Simulation(self_collision_scene(30, mode="spec"))
+    sim.step(60)
+    assert count_crossings(sim.positions, sim.nw, sim.nh) > 0
+
+
+@pytest.mark.parametrize("integrator,damping", [INTEGRATIONS[0], INTEGRATIONS[3]])
+def test_flag_never_crosses_and_pins_stay(integrator: str, damping: str) -> None:
+    scene = flag_scene()
+    scene = scene.with_simulation(integrator=integrator, damping_mode=damping)
+    sim = Simulation(scene)
+    pinned = sim.pinned.copy()
+    start = sim.positions[pinned].copy()
+    counts, _ = crossings_per_frame(sim, 60)
+    assert counts == [0] * len(counts)
+    assert np.array_equal(sim.positions[pinned], start)
+
+
+def test_moving_pins_follow_their_track() -> None:
+    """The pass never moves a pinned point: with contact on, pins end exactly where the track puts
+    them (the same bits as with self-collision off)."""
+    scene = load_scene(SCENES / "shake.json").with_cloth(num_width_points=16, num_height_points=16,
+                                                         pinned=tuple((i, 0) for i in range(16)))
+    sim = Simulation(scene.with_simulation(self_collision="contact"))
+    track = scene.cloth.pin_motion.track()
+    rest = sim.initial_positions[sim.pinned]
+    for _ in range(20):
+        sim.step(1)
+        offset = track.at(sim.time)
+        assert np.allclose(sim.positions[sim.pinned], rest + offset, rtol=0, atol=1e-12)
+
+
+def test_same_bits_twice() -> None:
+    a, b = (Simulation(self_collision_scene(20)) for _ in range(2))
+    a.step(50)
+    b.step(25)
+    b.step(25)
+    assert np.array_equal(a.positions, b.positions) and np.array_equal(a.last_positions, b.last_positions)
+
+
+def folded(sim: Simulation, layers: int, gap: float, tilt: float = 0.0) -> None:
+    """Lay a horizontal cloth in ``layers`` stacked folds ``gap`` apart (rows shared out), the
+    layer above each tilted by ``tilt`` (a slope along x, to make them pierce each other), with a
+    seeded jitter of 0.1 mm so that no point lies exactly on another element."""
+    nw, nh = sim.nw, sim.nh
+    x0 = sim.initial_positions.reshape(nh, nw, 3)
+    per = nh // layers
+    pos = x0.copy()
+    spacing = x0[1, 0, 2] - x0[0, 0, 2]
+    for j in range(nh):
+        layer = min(j // per, layers - 1)
+        k = j - layer * per
+        z = k * spacing if layer % 2 == 0 else (per - 1 - k) * spacing
+        pos[j, :, 2] = z
+        pos[j, :, 1] = 0.3 + layer * gap + tilt * layer * (x0[j, :, 0] - 0.5)
+    pos += np.random.default_rng(3).uniform(-1e-4, 1e-4, pos.shape)
+    sim.positions[:] = pos.reshape(-1, 3)
+    sim.last_positions[:] = pos.reshape(-1, 3)
+
+
+def heap_scene(n: int = 24):
+    raw = {"cloth": {"width": 1.0, "height": 1.0, "num_width_points": n, "num_height_points": n, "thickness": 0.0095,
+                     "orientation": "horizontal", "damping": 0.2, "density": 150.0, "ks": 5000.0},
+           "plane": {"point": [0.5, 0.0, 0.5], "normal": [0.0, 1.0, 0.0], "friction": 0.5},
+           "simulation": {"self_collision": "contact"}}
+    return scene_from_dict(raw)
+
+
+def test_heap_of_folds_dropped_on_a_plane() -> None:
+    sim = Simulation(heap_scene())
+    folded(sim, 4, 0.03)
+    assert count_crossings(sim.positions, sim.nw, sim.nh) == 0
+    counts, pairs = crossings_per_frame(sim, 60)
+    assert counts == [0] * len(counts)
+    assert pairs > 0
+    assert sim.positions[:, 1].min() > -1e-3
+    assert sim.positions[:, 1].max() < 0.3  # it fell and lies in folds
+
+
+def test_a_cloth_that_starts_crossed_is_warned_about_and_gains_none() -> None:
+    sim = Simulation(heap_scene())
+    folded(sim, 3, 0.03, tilt=0.2)
+    start = count_crossings(sim.positions, sim.nw, sim.nh)
+    assert start > 0
+    with pytest.warns(RuntimeWarning, match=rf"starts with {start} self-crossings"):
+        sim.step(1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        counts, _ = crossings_per_frame(sim, 40)  # warned once only
+    assert max(counts) <= start
+    assert np.isfinite(sim.positions).all() and np.abs(sim.positions).max() < 5.0
+
+
+def test_scene_rule_accepts_contact_and_names_it() -> None:
+    raw = json.loads((SCENES / "selfCollision.json").read_text())
+    assert scene_from_dict({**raw, "simulation": {"self_collision": "contact"}}).simulation.self_collision == "contact"
+    with pytest.raises(SceneError, match='simulation.self_collision.*"contact"'):
+        scene_from_dict({**raw, "simulation": {"self_collision": "touch"}})
+
+
+@pytest.mark.skipif(numba.get_num_threads() < 2, reason="Numba has one thread here: no team of two")
+def test_team_size_does_not_change_the_numbers() -> None:
+    scene = self_collision_scene(20)
+    out = []
+    for size in (1, 2):
+        sim = Simulation(scene)
+        for _ in range(40):
+            sim._forget_contacts()
+            assert sim.run_kernel(scene.simulation.simulation_steps, PASS_ALL, size)
+        out.append(sim.positions.copy())
+    assert np.array_equal(out[0], out[1])
+
+
+def test_fused_frame_matches_pass_by_pass_profile() -> None:
+    scene = self_collision_scene(20)
+    fused = Simulation(scene)
+    fused.step(40)
+    profiled = Simulation(scene)
+    profiler = Profiler(profiled)
+    for _ in range(40):
+        profiler.frame()
+    assert np.array_equal(fused.positions, profiled.positions)
+    assert profiler.calls["contact bound"] == 40 * scene.simulation.simulation_steps
