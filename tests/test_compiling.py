@@ -93,7 +93,7 @@ def test_bench_compile_reports_each_kernel_of_a_cold_start() -> None:
     assert command.startswith("simulate: clothsim simulate pinned2 --frames 90")
     wall, compile_s = (float(x) for x in command.split()[-2:])
     assert 0 < compile_s < wall
-    assert "sim.solvers.frame._member [ClothState, SpecHash, -, -, -, -, -, -]" in out
+    assert "sim.solvers.frame._member [ClothState, SpecHash, -, -, -, -, -, -, -]" in out
     assert "sim.solvers.frame.run_substeps" in out
 
 

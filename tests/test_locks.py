@@ -180,8 +180,8 @@ def test_two_different_sweeps_started_together_one_runs_the_other_names_it(tmp_p
     records = [json.loads(line) for line in (out / "manifest.jsonl").read_text().splitlines()]
     assert sorted(r["id"] for r in records) == ["run_00000", "run_00001"]
     assert all(list(r["params"]) == [field] for r in records)
-    assert sorted(p.name for p in out.rglob("*")) == ["manifest.jsonl", "run_00000.npz", "run_00001.npz",
-                                                      "runs", "sweep.json"]
+    assert sorted(p.name for p in out.rglob("*")) == ["manifest.jsonl", "meta.json", "run_00000.npz",
+                                                      "run_00001.npz", "runs", "sweep.json"]
 
 
 def test_the_same_sweep_started_twice_runs_each_run_once(tmp_path):
@@ -230,4 +230,4 @@ def test_a_killed_sweeps_lock_and_temporary_files_do_not_survive_the_next_run(tm
     assert r.returncode == 0, r.stderr
     assert f"{6 - done_before} done, 0 failed, {done_before} skipped" in r.stderr
     assert sorted(p.name for p in runs.iterdir()) == [f"run_{i:05d}.npz" for i in range(6)]
-    assert sorted(p.name for p in out.iterdir()) == ["manifest.jsonl", "runs", "sweep.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["manifest.jsonl", "meta.json", "runs", "sweep.json"]
