@@ -458,15 +458,14 @@ class Renderer:
         # Moving colliders are drawn where they are at the simulation's time: the shape built at
         # its scene pose, moved by the model matrix. Kind by kind, in the registry's order.
         now = float(getattr(sim, "time", 0.0))
-        draw = {"sphere": self._draw_sphere, "plane": self._draw_plane, "capsule": self._draw_capsule,
-                "box": self._draw_box, "mesh": self._draw_mesh}
         drawn = 0
         for kind in KINDS:
+            draw = getattr(self, f"_draw_{kind.key}")
             for spec in getattr(scene, kind.attr):
                 if mark is not None:
                     mark(drawn)
                 drawn += 1
-                draw[kind.key](prog, look, settings, spec, now)
+                draw(prog, look, settings, spec, now)
         self.ctx.disable(moderngl.CULL_FACE)
         self.ctx.polygon_offset = (0.0, 0.0)
 
