@@ -21,10 +21,46 @@ REPO = Path(__file__).resolve().parent.parent
 SCENES = REPO / "scenes"
 
 
+def _worker_threads() -> int | None:
+    """Threads each of pytest-xdist's workers may use: the cores shared out among the workers
+    (None outside a worker: a serial run keeps them all)."""
+    workers = os.environ.get("PYTEST_XDIST_WORKER_COUNT")
+    if not os.environ.get("PYTEST_XDIST_WORKER") or not workers:
+        return None
+    return max(1, len(os.sched_getaffinity(0)) // int(workers))
+
+
+#: The suite runs one worker per core, each with a core's share of threads: the frame kernel's
+#: thread team spins at its barriers, so two workers each running a team of two on two cores
+#: waited for members that had no core (a 600-frame render took 13.5 s instead of 2.2 s next to
+#: another busy process). The kernels give the same bits on any number of threads; the tests of
+#: the team itself ask for every thread (:func:`all_threads`). Children started through
+#: :func:`run_cli` get the same share, and llvmpipe (Mesa's renderer) one render thread per share.
+WORKER_THREADS = _worker_threads()
+if WORKER_THREADS is not None:
+    import numba
+
+    numba.set_num_threads(min(WORKER_THREADS, numba.config.NUMBA_NUM_THREADS))
+    os.environ.setdefault("LP_NUM_THREADS", str(WORKER_THREADS))
+
+
+@pytest.fixture
+def all_threads():
+    """Numba's every thread for this test (the team's own tests), the worker's share after it."""
+    import numba
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    yield numba.config.NUMBA_NUM_THREADS
+    numba.set_num_threads(before)
+
+
 def run_cli(*args: str, cwd: Path | None = None, timeout: float = 300) -> subprocess.CompletedProcess:
     """Run ``python -m clothsim ARGS`` and capture its output."""
     env = dict(os.environ)
     env.pop("DISPLAY", None)
+    if WORKER_THREADS is not None:
+        env.setdefault("NUMBA_NUM_THREADS", str(WORKER_THREADS))
     return subprocess.run([sys.executable, "-m", "clothsim", *args], cwd=cwd, capture_output=True, text=True,
                           timeout=timeout, env=env)
 

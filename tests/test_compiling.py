@@ -187,3 +187,43 @@ def test_processes_compiling_one_kernel_at_once_leave_a_cache_every_process_can_
                           cwd=tmp_path, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split() == ["6", "0"]  # all six loaded, none compiled again
+
+
+def test_an_exact_kernel_stays_exact_whoever_calls_it_first() -> None:
+    # Numba compiles a callee that leaves fastmath unset with its caller's flags and caches it
+    # under its signature alone: an EXACT kernel first compiled by a fast-math caller was then
+    # fast-math for every later caller (and every process loading that cache).
+    import re
+
+    from numba import njit
+
+    from clothsim.jit import EXACT, KERNEL
+
+    @njit(**{**EXACT, "cache": False})
+    def exact(x: float, w: float) -> float:
+        return x / w + 1.0
+
+    @njit(**{**KERNEL, "cache": False})
+    def fast(x: float, w: float) -> float:
+        return exact(x, w) * 2.0
+
+    assert fast(1.0, 3.0) == (1.0 / 3.0 + 1.0) * 2.0
+    (sig,) = exact.overloads
+    divisions = [line for line in exact.inspect_llvm(sig).splitlines() if " fdiv " in line]
+    assert divisions and not any(re.search(r"fdiv (fast|reassoc|arcp|contract|afn|nsz)", d) for d in divisions)
+
+
+def test_every_kernel_says_its_floating_point_rules() -> None:
+    # every @njit of the package takes one of the option sets, each of which sets fastmath
+    import ast
+
+    from clothsim import jit
+
+    for options in (jit.KERNEL, jit.EXACT, jit.PARALLEL):
+        assert "fastmath" in options
+    allowed = {"KERNEL", "EXACT", "PARALLEL"}
+    for path in (Path(jit.__file__).parent.parent).rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "njit":
+                stars = {k.value.id for k in node.keywords if k.arg is None and isinstance(k.value, ast.Name)}
+                assert stars & allowed or any(k.arg == "fastmath" for k in node.keywords), (path, node.lineno)

@@ -167,8 +167,8 @@ def test_scene_rule_accepts_contact_and_names_it() -> None:
         scene_from_dict({**raw, "simulation": {"self_collision": "touch"}})
 
 
-@pytest.mark.skipif(numba.get_num_threads() < 2, reason="Numba has one thread here: no team of two")
-def test_team_size_does_not_change_the_numbers() -> None:
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="Numba has one thread here: no team of two")
+def test_team_size_does_not_change_the_numbers(all_threads: int) -> None:
     scene = self_collision_scene(20)
     out = []
     for size in (1, 2):

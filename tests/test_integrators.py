@@ -205,8 +205,8 @@ def test_reset_and_rerun_is_deterministic(integrator: str) -> None:
 
 
 @pytest.mark.parametrize("n, expected", [(6, 1), (91, 2)])
-def test_small_cloths_off_the_spec_path_run_on_one_thread(n: int, expected: int,
-                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+def test_small_cloths_off_the_spec_path_run_on_one_thread(n: int, expected: int, monkeypatch: pytest.MonkeyPatch,
+                                                          all_threads: int) -> None:
     # Each pass of these integrators is its own parallel loop: below PARALLEL_MIN_POINTS (8192) the
     # fork and join cost more than the work, so a frame runs on one thread and the caller's thread
     # count is back afterwards.

@@ -40,13 +40,13 @@ def _run(scene, frames: int, size: int) -> tuple[np.ndarray, list[int]]:
 CASES = [("selfCollision", {}), ("sphere", {}), ("pinned2", {"self_collision": "grid"}),
          ("pinned4", {"self_collision": "off", "max_stretch": None})]
 
-needs_two_threads = pytest.mark.skipif(numba.get_num_threads() < 2,
+needs_two_threads = pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2,
                                        reason="Numba has one thread here: a team of two would be one member alone")
 
 
 @needs_two_threads
 @pytest.mark.parametrize(("name", "simulation"), CASES, ids=[c[0] for c in CASES])
-def test_team_size_does_not_change_the_numbers(name: str, simulation: dict) -> None:
+def test_team_size_does_not_change_the_numbers(name: str, simulation: dict, all_threads: int) -> None:
     scene = _scene(name, **simulation)
     one, _ = _run(scene, 12, 1)
     two, modes = _run(scene, 12, 2)

@@ -13,8 +13,7 @@ from numba import njit
 import clothsim
 from clothsim.errors import FieldError, SceneError
 from clothsim.scene import scene_from_dict
-from clothsim.sim.passes.wind import add_wind, air_velocity, incidence, triangles
-from clothsim.sim.state import Wind
+from clothsim.sim.passes.wind import Wind, add_wind, air_velocity, incidence, triangles
 from clothsim.wind import GUST_MODES, WindSpec, gust_modes, wind_rows
 
 from conftest import error_line, run_cli
@@ -90,7 +89,7 @@ def test_every_point_gets_a_third_of_each_of_its_triangles():
 def test_still_wind_gives_the_same_bits_as_no_wind(integrator):
     none = run(curtain(integrator=integrator), 4)
     still = run(curtain({"velocity": [0, 0, 0], "turbulence": 0, "drag": 2.0, "lift": 1.0}, integrator=integrator), 4)
-    assert still._kernel_args.wind is None  # no pass at all
+    assert still._kernel_args.forces == ()  # no pass at all
     assert np.array_equal(none.positions, still.positions)
     assert np.array_equal(none.last_positions, still.last_positions)
     gusty = run(curtain({"velocity": [0, 0, 0], "turbulence": 2.0}, integrator=integrator), 4)
@@ -177,7 +176,7 @@ def test_the_frame_does_not_depend_on_how_its_substeps_are_grouped():
 def test_wind_is_settable_between_frames():
     data = curtain()
     sim = run(data, 2)
-    assert sim.wind == () and sim._kernel_args.wind is None
+    assert sim.wind == () and sim._kernel_args.forces == ()
     sim.wind = {"velocity": [0, 0, 5.0]}
     assert sim.wind == (WindSpec(velocity=(0.0, 0.0, 5.0)),)
     before = sim.positions[:, 2].mean()
@@ -186,7 +185,7 @@ def test_wind_is_settable_between_frames():
     sim.wind = [WindSpec(velocity=(1.0, 0.0, 0.0)), {"velocity": [0, 0, -1], "turbulence": 1}]
     assert len(sim.wind) == 2
     sim.wind = None
-    assert sim.wind == () and sim._kernel_args.wind is None
+    assert sim.wind == () and sim._kernel_args.forces == ()
     with pytest.raises(FieldError, match=r"^wind\.drag: must be >= 0, got -1"):
         sim.wind = {"drag": -1}
     with pytest.raises(FieldError, match=r"^wind\[1\]\.velocity\[2\]: "):

@@ -23,7 +23,8 @@ from .motion import MOTION, MotionSpec
 from .meshcollider import MeshSpec
 from .resources import data_dir
 from .validate import SceneWarning  # noqa: F401 - warned by the rules, imported from here by users
-from .wind import WINDS, WindSpec
+from .forces import FORCES
+from .wind import WindSpec
 
 HORIZONTAL = 0
 VERTICAL = 1
@@ -40,10 +41,6 @@ SELF_COLLISION_MODES = ("spec", "grid", "off", "contact")
 # not see (Numba's allocations inside kernels) and for the output's copies (.npz, vertex buffers).
 BYTES_PER_POINT = 1024
 BYTES_PER_POINT_OTHER_INTEGRATORS = 1728
-# Added by a blowing wind (counted from its arrays, not measured): two triangles a point, each
-# with its corners (3 x 8 B), force (3 x 8 B) and work space (12 x 8 B), and a point's list of
-# triangles (7 x 8 B): 344 B, plus 25 %.
-WIND_BYTES_PER_POINT = 432
 
 
 @dataclass(frozen=True)
@@ -201,9 +198,10 @@ def scene_from_dict(data: Any, path: str = "<scene>", files: Any = None) -> Scen
         raise SceneError(path, "", f"top level must be a JSON object, got {V.shown(data)}")
     values = SCENE(data, V.At(path, files=files))
     cloth = ClothSpec(**values["cloth"])
-    _check_memory(cloth, values["simulation"], path, values["winds"])
-    return Scene(cloth=cloth, winds=values["winds"], simulation=values["simulation"], render=values["render"],
-                 path=path, **{kind.attr: values[kind.attr] for kind in KINDS})
+    forces = {kind.attr: values[kind.attr] for kind in FORCES}
+    _check_memory(cloth, values["simulation"], path, forces)
+    return Scene(cloth=cloth, simulation=values["simulation"], render=values["render"], path=path,
+                 **{kind.attr: values[kind.attr] for kind in KINDS}, **forces)
 
 
 def check_field(section: str, name: str, value: Any) -> Any:
@@ -313,11 +311,11 @@ def _render(value: Any, at: V.At) -> dict[str, Any]:
 SCENE = V.record({
     "cloth": V.required(CLOTH),
     **{kind.key: V.default(V.one_or_many(kind.rule), (), dest=kind.attr) for kind in KINDS},
-    "wind": V.default(WINDS, (), dest="winds"),
+    **{kind.key: V.default(kind.rule, (), dest=kind.attr) for kind in FORCES},
     "simulation": V.default(_simulation, _SIM_DEFAULTS, dest="simulation"),
     "render": V.default(_render, None),
 }, unknown=("unknown top-level object (expected one of: cloth, " + ", ".join(k.key for k in KINDS)
-            + ", wind, simulation, render)"))
+            + "".join(f", {k.key}" for k in FORCES) + ", simulation, render)"))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -423,12 +421,12 @@ def bytes_per_point(simulation: SimulationSpec) -> int:
 
 def check_memory(scene: Scene) -> None:
     """Refuse (SceneError naming the grid size) a scene whose run would not fit in memory."""
-    _check_memory(scene.cloth, scene.simulation, scene.path, scene.winds)
+    _check_memory(scene.cloth, scene.simulation, scene.path, {kind.attr: getattr(scene, kind.attr) for kind in FORCES})
 
 
-def _check_memory(cloth: ClothSpec, simulation: SimulationSpec, path: str, winds: tuple = ()) -> None:
-    blowing = any(not w.still for w in winds)
-    need = cloth.num_points * (bytes_per_point(simulation) + (WIND_BYTES_PER_POINT if blowing else 0))
+def _check_memory(cloth: ClothSpec, simulation: SimulationSpec, path: str, forces: dict[str, tuple]) -> None:
+    extra = sum(kind.bytes_per_point(forces[kind.attr]) for kind in FORCES)
+    need = cloth.num_points * (bytes_per_point(simulation) + extra)
     avail = available_memory()
     if need > avail:
         raise SceneError(

@@ -18,6 +18,7 @@ cycles per metre, frequencies in Hz, phases in cycles) are drawn from ``seed`` a
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -32,6 +33,10 @@ GUST_MODES = 4
 MODE_FLOATS = 8
 #: Floats per wind in :func:`wind_rows`: velocity (3), 1/2 rho C_d, rho C_L, turbulence.
 WIND_FLOATS = 6
+# Added by a blowing wind (counted from its arrays, not measured): two triangles a point, each
+# with its corners (3 x 8 B), force (3 x 8 B) and work space (12 x 8 B), and a point's list of
+# triangles (7 x 8 B): 344 B, plus 25 %.
+WIND_BYTES_PER_POINT = 432
 
 
 @dataclass(frozen=True)
@@ -118,3 +123,8 @@ def wind_rows(winds: tuple[WindSpec, ...]) -> tuple[np.ndarray, np.ndarray]:
                      for w in blowing], dtype=np.float64).reshape(-1, WIND_FLOATS)
     modes = np.array([gust_modes(w) for w in blowing], dtype=np.float64).reshape(-1, GUST_MODES, MODE_FLOATS)
     return rows, modes
+
+
+def wind_speed(winds: tuple[WindSpec, ...]) -> float:
+    """Bound (m/s) on the air's speed: the fastest wind with its gusts (the blow-up guard's)."""
+    return max((math.hypot(*w.velocity) + w.turbulence for w in winds), default=0.0)

@@ -8,6 +8,7 @@ import dataclasses
 import statistics
 import time
 
+from ..forces import FORCES
 from ..scene import bundled_scene_names, load_scene
 from ..validate import check, integer
 
@@ -45,12 +46,14 @@ def run(args: argparse.Namespace) -> int:
         check(integer(ge=low), value, flag)
     names = args.scenes or bundled_scene_names()
     scenes = [load_scene(name) for name in names]  # a bad name fails before any timing
-    # A scene with wind or triangle meshes is timed again without them, in the same run: their cost.
+    # A scene with a force (wind) or triangle meshes is timed again without them, in the same run:
+    # their cost.
     rows = []
     for name, scene in zip(names, scenes):
         rows.append((name, scene))
-        if scene.winds:
-            rows.append((f"{name} -wind", dataclasses.replace(scene, winds=())))
+        for kind in FORCES:
+            if getattr(scene, kind.attr):
+                rows.append((f"{name} -{kind.key}", dataclasses.replace(scene, **{kind.attr: ()})))
         if scene.meshes:
             rows.append((f"{name} -mesh", dataclasses.replace(scene, meshes=())))
     print(f"{'scene':<15}{'self-coll.':>11}{'ms/frame':>10}{'substeps/s':>12}{'x realtime':>11}"

@@ -32,7 +32,12 @@ FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
 KERNEL = {"cache": True, "fastmath": FASTMATH, "error_model": "numpy"}
 
 #: Options for kernels that keep IEEE evaluation order (bit-exact closed forms, drivers).
-EXACT = {"cache": True, "error_model": "numpy"}
+#: ``fastmath=False`` is said explicitly: Numba compiles a callee that does not set it with its
+#: caller's fast-math flags, and files that compile in the on-disk cache under the callee's
+#: signature alone, so an unset callee was fast or exact depending on which caller compiled it
+#: first, in whichever process filled the cache (seen as implicit Euler's and the contact mode's
+#: numbers changing between a cold and a warm run).
+EXACT = {"cache": True, "error_model": "numpy", "fastmath": False}
 
 #: KERNEL split over the cores with ``prange``; such kernels keep every output element a
 #: function of its own inputs, so results do not depend on the number of threads.

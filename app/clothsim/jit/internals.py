@@ -1,4 +1,5 @@
-"""Every use of Numba's private API, in one place: call-by-address, the compiled-or-cached test,
+"""Every use of Numba's private API, in one place: call-by-address, values handed by address
+through a parallel loop (:func:`stash`), the compiled-or-cached test,
 the package-wide cache stamp, and the thread team's atomics and clock (LLVM IR through
 ``numba.core.cgutils``). :func:`missing_private_api` names what a Numba release lacks (the
 test suite checks it, so an upgrade that removes any of it fails there with that name, not with a
@@ -165,6 +166,52 @@ def call_native(typingctx, address, args):  # noqa: ANN001, ANN201
     return sig, codegen
 
 
+@intrinsic
+def stash(typingctx, value):  # noqa: ANN001, ANN201
+    """The address of a copy of ``value`` (any Numba value: a tuple of groups, say) on the caller's
+    stack, valid until the caller returns, for :func:`unstash` in a kernel the caller calls.
+
+    A parallel loop passes each value it reads to its threads as an argument of Numba's gufunc,
+    which takes arrays and scalars, and tuples of them, but not a tuple of tuples; an address and
+    a :func:`type_ref` pass through any loop.
+    """
+    sig = types.int64(value)
+
+    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
+        ptr = cgutils.alloca_once_value(builder, args[0])
+        return builder.ptrtoint(ptr, ir.IntType(64))
+
+    return sig, codegen
+
+
+@intrinsic
+def type_ref(typingctx, value):  # noqa: ANN001, ANN201
+    """The type of ``value`` as a value (no data), for :func:`unstash`."""
+    sig = types.TypeRef(value)(value)
+
+    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def unstash(typingctx, address, proto):  # noqa: ANN001, ANN201
+    """The value :func:`stash` put at ``address``; ``proto`` is its :func:`type_ref`. The caller
+    of :func:`stash` must still be running."""
+    ty = proto.instance_type
+    sig = ty(address, proto)
+
+    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
+        ptr = builder.inttoptr(args[0], context.get_value_type(ty).as_pointer())
+        value = builder.load(ptr)
+        # the value is returned as a new reference: its arrays are released when it goes out of scope
+        context.nrt.incref(builder, ty, value)
+        return value
+
+    return sig, codegen
+
+
 def native_address(kernel: Any, argtypes: tuple) -> int:
     """Address of ``kernel`` compiled (or loaded from the cache) for ``argtypes``, for
     :func:`call_native`."""
@@ -200,6 +247,10 @@ def missing_private_api() -> list[str]:
     for name in ("_load_index", "_save_index", "_save_data", "_data_name"):
         if not hasattr(caching.IndexDataCacheFile, name):
             missing.append(f"numba.core.caching.IndexDataCacheFile.{name}")
+    for name in ("alloca_once", "alloca_once_value", "unpack_tuple", "get_null_value", "get_item_pointer",
+                 "get_or_insert_function", "gep_inbounds"):
+        if not hasattr(cgutils, name):
+            missing.append(f"numba.core.cgutils.{name}")
     for name in ("_get_arg_packer", "_get_return_status", "get_function_type", "get_return_type"):
         if not hasattr(CPUCallConv, name):
             missing.append(f"numba.core.callconv.CPUCallConv.{name}")

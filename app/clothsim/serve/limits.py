@@ -17,6 +17,7 @@ from __future__ import annotations
 import math
 
 from ..errors import ClothsimError
+from ..forces import scene_forces
 from ..scene import Scene
 
 __all__ = ["FRAME_BUDGET_S", "MAX_POINTS", "check_scene", "check_substeps", "frame_seconds"]
@@ -30,12 +31,12 @@ MAX_POINTS = 256 * 256
 _INTEGRATOR_S = {"verlet": 30e-9, "symplectic_euler": 30e-9, "implicit_euler": 700e-9, "xpbd": 700e-9}
 _SELF_COLLISION_S = {"off": 0.0, "spec": 120e-9, "grid": 500e-9, "contact": 2000e-9}
 _PER_MESH_S = 120e-9
-_PER_OTHER_S = 10e-9  # each sphere, plane, capsule, box or wind
+_PER_OTHER_S = 10e-9  # each sphere, plane, capsule, box or force (wind)
 
 
 def _point_substep_s(scene: Scene) -> float:
     sim = scene.simulation
-    others = len(scene.colliders) - len(scene.meshes) + len(scene.winds)
+    others = len(scene.colliders) - len(scene.meshes) + len(scene_forces(scene))
     return (_INTEGRATOR_S.get(sim.integrator, max(_INTEGRATOR_S.values()))
             + _SELF_COLLISION_S.get(sim.self_collision, max(_SELF_COLLISION_S.values()))
             + _PER_MESH_S * len(scene.meshes) + _PER_OTHER_S * others)

@@ -8,12 +8,17 @@ starts at ``clock[0] + (clock[1] + s) * dt``: computed, not summed up, so a run 
 times however its substeps are grouped into calls (frames, single substeps in the blow-up replay,
 pass by pass in the profiler).
 
+Moving spheres, planes, capsules and boxes count a substep's times from the call's start
+(:func:`call_time` plus ``step`` substep lengths, the end one substep length later), the others
+from the clock's base (:func:`substep_time`): each is the arithmetic its motion had before they
+shared this clock, so no scene's numbers changed when they did (the two differ in the last bits).
+
 One dispatcher for the track on purpose: Numba's on-disk cache files a function's compiled
 versions under the function and its argument types, not its options, so two dispatchers of the
 same Python function with different options load each other's code (a pin then landed one ulp
-off its track). ``fastmath=False`` is said explicitly: Numba compiles a callee that does not set
-it with its caller's fast-math flags, and the frame kernel's contracted arithmetic put a pin one
-ulp off rest + ``Track.at(t)``, the Python evaluation the tests compare with.
+off its track). Like every :data:`~clothsim.jit.EXACT` kernel it is compiled without fast-math
+whoever calls it: the frame kernel's contracted arithmetic once put a pin one ulp off rest +
+``Track.at(t)``, the Python evaluation the tests compare with.
 """
 
 from __future__ import annotations
@@ -24,13 +29,17 @@ from numba import njit
 from ..motion import position_at
 from ..jit import EXACT
 
-IEEE = {**EXACT, "fastmath": False}
-
-track_at = njit(**IEEE)(position_at)
+track_at = njit(**EXACT)(position_at)
 
 
-@njit(**IEEE)
+@njit(**EXACT)
 def substep_time(clock: np.ndarray, step: int, dt: float) -> float:
     """Time (s) at the start of substep ``step`` of a call (``step`` may be one past the last, for
     the time at a substep's end): clock = (base time, substeps since)."""
     return clock[0] + (clock[1] + step) * dt
+
+
+@njit(**EXACT)
+def call_time(clock: np.ndarray, dt: float) -> float:
+    """Time (s) at the start of a call: the simulation's ``time``."""
+    return clock[0] + clock[1] * dt

@@ -21,6 +21,7 @@ import numpy as np
 from numba import njit
 
 from ..cloth import BENDING, BENDING_STIFFNESS_FACTOR, all_springs, enabled_mask, grid_positions, pinned_mask
+from ..forces import FORCES
 from ..scene import Scene
 from ..jit import EXACT
 from ..jit.compile import on_warm
@@ -136,9 +137,9 @@ def sim_blow_up_reason(sim: Any) -> str | None:
 
 
 def driven_speed(scene: Scene) -> float:
-    """Bound (m/s) on the speed of what drives the cloth: the fastest wind with its gusts plus the
-    fastest moving pin."""
-    wind = max((math.hypot(*w.velocity) + w.turbulence for w in scene.winds), default=0.0)
+    """Bound (m/s) on the speed of what drives the cloth: the fastest force's driver (the fastest
+    wind with its gusts) plus the fastest moving pin."""
+    air = max((kind.top_speed(getattr(scene, kind.attr)) for kind in FORCES), default=0.0)
     motion = scene.cloth.pin_motion
     pins = 0.0
     if motion is not None:
@@ -147,7 +148,7 @@ def driven_speed(scene: Scene) -> float:
         if track.times.shape[0] > 1:
             steps = np.linalg.norm(np.diff(track.points, axis=0), axis=1) / np.diff(track.times)
             pins = max(pins, float(steps.max()))
-    return wind + pins
+    return air + pins
 
 
 def blow_up_advice(scene: Scene) -> str:

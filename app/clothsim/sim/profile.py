@@ -7,6 +7,7 @@ import time
 
 
 from ..colliders import kinds_text
+from .passes.forces import FORCES
 from .solvers.frame import PASS_COLLIDERS, PASS_CONTACT, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF
 
 PASSES = ("forces+integrate", "self-collision", "colliders", "provot", "contact bound")
@@ -39,15 +40,17 @@ class Profiler:
                                    ("bending", sim.enable_bending)) if not on]
             if off:
                 out["springs: " + ", ".join(off)] = "family disabled (absent from the spring arrays)"
-        if sim._self_mode == 0:
+        if sim.self_mode == 0:
             out["self-collision"] = "simulation.self_collision is false"
         if sim.n_colliders == 0:
             out["colliders"] = f"scene has no {kinds_text()}"
-        if sim._kernel_args.wind is None:
-            out["wind"] = "scene has no wind (or only still air)"
-        if sim._kernel_args.pins is None:
+        present = {type(group) for group in sim.plan.forces}
+        for force in FORCES:
+            if force.Group not in present:
+                out[force.NAME] = force.ABSENT
+        if sim.plan.pins is None:
             out["moving pins"] = "cloth has no pin_motion"
-        if sim._stretch_limit <= 0:
+        if sim.plan.st.stretch_limit <= 0:
             out["provot"] = "simulation.max_stretch is null"
         if sim.pinned.any():
             out[f"integrate: {int(sim.pinned.sum())} pinned points"] = "put back after the sweep"
@@ -72,13 +75,13 @@ class Profiler:
         sim = self.sim
         t = time.perf_counter
         n_colliders = sim.n_colliders
-        plan = sim._kernel_args
-        hashed = sim._self_mode != 0  # (the contact mode's response runs in this slot)
+        plan = sim.plan
+        hashed = sim.self_mode != 0  # (the contact mode's response runs in this slot)
         for _ in range(steps):
             for name, bit, on in (("forces+integrate", PASS_INTEGRATE, True),
                                   ("self-collision", PASS_SELF, hashed),
                                   ("colliders", PASS_COLLIDERS, n_colliders > 0),
-                                  ("provot", PASS_PROVOT, sim._stretch_limit > 0),
+                                  ("provot", PASS_PROVOT, sim.plan.st.stretch_limit > 0),
                                   ("contact bound", PASS_CONTACT, plan.contact is not None)):
                 if on:
                     before = sim.colliders_skipped

@@ -9,11 +9,12 @@ from ..cloth import (BENDING, BENDING_STIFFNESS_FACTOR, Springs, all_springs, en
 from ..errors import SimulationBlowUp
 from ..scene import Scene, check_field
 from ..validate import At, check, integer
-from ..wind import WINDS, wind_rows
+from ..wind import WINDS
 from . import team
 from .passes.colliders.primitives import SURFACE_OFFSET
 from .solvers.frame import PASS_ALL, kernel_addresses, run_substeps
-from .passes.wind import incidence, triangles
+from .passes.forces import plan_forces
+from .passes.wind import triangles
 from ..jit import CHUNKS
 from .passes.pins import move_pins
 from .passes.colliders.moving import pack_motion, top_speed
@@ -21,7 +22,7 @@ from .passes.colliders.shapes import collider_rows
 from .passes.colliders.meshgrid import mesh_group
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
 from .passes.contact import contact_group, response_reach
-from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash, Wind
+from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash
 
 #: The contact mode: a pass of its own (passes/contact.py), not a query of the hash.
 MODE_CONTACT = 3
@@ -87,7 +88,8 @@ class Simulation:
         self._boxes = np.zeros((CHUNKS, 6))
         self._skips = np.zeros(1, dtype=np.int64)
         self._pins = np.flatnonzero(self.pinned)
-        self._tris: np.ndarray | None = None
+        #: Arrays a pass makes once per simulation (the wind's mesh, say), by pass name.
+        self.pass_arrays: dict[str, tuple] = {}
         self._sync = team.new_sync()
         #: Members of the next frames' thread team (recovers after a failed roll call).
         self.team = team.TeamPlan()
@@ -204,6 +206,30 @@ class Simulation:
         return 1.0 / (s.frames_per_sec * s.simulation_steps)
 
     @property
+    def plan(self) -> Plan:
+        """The groups of the current plan (:mod:`clothsim.sim.state`): the arrays the passes run on,
+        re-made by every re-plan. For the integrators and tools; change them at your own risk."""
+        return self._kernel_args
+
+    @property
+    def spring_stiffness(self) -> np.ndarray:
+        """Stiffness (N/m) of each spring of :attr:`springs` (0 for a cut one), re-made (a new
+        array) by every re-plan."""
+        return self._spring_k
+
+    @property
+    def self_mode(self) -> int:
+        """The self-collision mode as the kernels number it (0 = off; see
+        :mod:`clothsim.sim.passes.selfcollide`)."""
+        return self._self_mode
+
+    @property
+    def clock(self) -> np.ndarray:
+        """The one clock of prescribed motion (:mod:`clothsim.sim.clock`): (time at the last
+        re-plan, substeps since), the array the passes' groups read (not a copy)."""
+        return self._clock
+
+    @property
     def mass(self) -> float:
         """Mass of one point (kg)."""
         c = self.scene.cloth
@@ -276,8 +302,7 @@ class Simulation:
             col = Colliders(self.free, self._spheres, self._planes, SURFACE_OFFSET, self._box, self._sphere_on,
                             self._plane_on, self._boxes, margin, self._capsules, self._cuboids, self._capsule_on,
                             self._cuboid_on)
-        return Plan(st, spec, grid, col, self._motion, self._meshes, self._wind_group(), self._pin_group(),
-                    contact)
+        return Plan(st, spec, grid, col, self._motion, self._meshes, plan_forces(self), self._pin_group(), contact)
 
     def _contact_group(self) -> tuple | None:
         """The contact mode's group, kept across re-plans of the same cloth (its reference state
@@ -298,19 +323,6 @@ class Simulation:
         cloth = self.scene.cloth
         return GridHash(self.free, cloth.thickness, self.scene.simulation.simulation_steps, self._cell, self._keys,
                         self._slots, self._table, self._order)
-
-    def _wind_group(self) -> Wind | None:
-        rows, modes = wind_rows(self.scene.winds)
-        if rows.shape[0] == 0:  # no wind, or only still ones: no pass, the same bits as none
-            return None
-        if self._tris is None:
-            self._tris = triangles(self.nw, self.nh)
-            self._incidence = incidence(self._tris, self.nw * self.nh)
-            self._tforce = np.zeros((3, self._tris.shape[1]))
-            self._wind_scratch = np.zeros((12, self._tris.shape[1]))
-        dt = self.dt
-        return Wind(rows, modes, self._tris, *self._incidence, self._tforce, self._wind_scratch, 1.0 / dt, dt,
-                    self._clock)
 
     def _pin_group(self) -> PinMotion | None:
         motion = self.scene.cloth.pin_motion

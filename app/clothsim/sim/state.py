@@ -100,24 +100,6 @@ class Colliders(NamedTuple):
     cuboid_on: np.ndarray | None = None
 
 
-class Wind(NamedTuple):
-    """The winds (:mod:`clothsim.sim.passes.wind`): their rows and gust modes (:func:`clothsim.wind.wind_rows`),
-    the mesh's triangles (3, T), each point's triangles (``start`` (N + 1,), ``incident``), the
-    per-triangle force buffer (3, T) and work space (12, T), 1/dt, dt and the clock (see
-    :class:`PinMotion`)."""
-
-    rows: np.ndarray
-    modes: np.ndarray
-    tris: np.ndarray
-    start: np.ndarray
-    incident: np.ndarray
-    tforce: np.ndarray
-    scratch: np.ndarray
-    inv_dt: float
-    dt: float
-    clock: np.ndarray
-
-
 class PinMotion(NamedTuple):
     """Moving pins (:mod:`clothsim.sim.passes.pins`): the pinned points, their rest positions (3, P),
     the offset's track (:class:`clothsim.motion.Track` arrays), the substep length and the
@@ -160,7 +142,8 @@ class Plan(NamedTuple):
     col: Colliders | None
     mov: tuple | None
     mesh: tuple | None
-    wind: Wind | None
+    #: the groups of the forces the scene uses (:mod:`clothsim.sim.passes.forces`), in registry order
+    forces: tuple
     pins: PinMotion | None
     #: the contact mode's group (:class:`clothsim.sim.passes.contact.Contact`)
     contact: tuple | None = None

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import ClothsimError, FieldError
 from ..colliders import KINDS
+from ..forces import FORCES
 from ..scene import Scene, scene_from_dict
 from ..validate import SceneWarning, shown
 
@@ -269,7 +270,8 @@ def scene_json(scene: Scene) -> dict[str, Any]:
         # every kind the scene has; the course's two always (its files name both)
         **{kind.key: [kind.to_json(c) for c in getattr(scene, kind.attr)] for kind in KINDS
            if getattr(scene, kind.attr) or kind.key in ("sphere", "plane")},
-        **({"wind": [w.as_json() for w in scene.winds]} if scene.winds else {}),
+        **{kind.key: [kind.to_json(f) for f in getattr(scene, kind.attr)] for kind in FORCES
+           if getattr(scene, kind.attr)},
         "simulation": dataclasses.asdict(scene.simulation),
         **({"render": scene.render} if scene.render is not None else {}),
     }

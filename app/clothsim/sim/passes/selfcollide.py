@@ -77,13 +77,14 @@ def _slot_shift(table: np.int64) -> np.int64:
     return shift
 
 
-@njit(**EXACT)
+@njit(**KERNEL)
 def cell_keys(pos: np.ndarray, cw: float, ch: float, ct: float, keys: np.ndarray, slots: np.ndarray,
               table: int, lo: int, hi: int) -> None:
     """Cell key and table slot of the points lo..hi-1 (``table`` slots, a power of two).
 
-    Compiled on its own with IEEE division: a reassociated x / w could put a point on the other
-    side of a cell boundary depending on where the loop was inlined."""
+    Compiled on its own, with the fast-math flags it has always been compiled with (its callers'
+    before they were set here: its division is x * (1 / w)), so that a point's cell does not
+    depend on where the loop is inlined or which kernel compiled it first."""
     shift = _slot_shift(table)
     for p in range(lo, hi):
         ix = np.int64(np.floor(pos[0, p] / cw))

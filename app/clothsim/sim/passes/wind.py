@@ -31,16 +31,47 @@ is a library call. Its range is exactly [-1, 1], so the field stays bounded.
 Work is split the frame kernel's way (:data:`~clothsim.jit.CHUNKS` ranges): per triangle a
 force into ``tforce``, then per point the sum over its triangles in a fixed order, so the result
 does not depend on the number of threads.
+
+This module is a force of :mod:`.forces` (its ``Group``, ``pack``, ``work`` and ``gather``), the
+registry's worked example.
 """
 
 from __future__ import annotations
+
+from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
 
 from ...cloth import cloth_triangles
 from ...jit import CHUNKS, KERNEL
+from ...wind import wind_rows
+from ..clock import substep_time
 from ..team import share
+
+
+class Wind(NamedTuple):
+    """The winds: their rows and gust modes (:func:`clothsim.wind.wind_rows`), the mesh's
+    triangles (3, T), each point's triangles (``start`` (N + 1,), ``incident``), the per-triangle
+    force buffer (3, T) and work space (12, T), 1/dt, dt and the simulation's clock
+    (:mod:`clothsim.sim.clock`)."""
+
+    rows: np.ndarray
+    modes: np.ndarray
+    tris: np.ndarray
+    start: np.ndarray
+    incident: np.ndarray
+    tforce: np.ndarray
+    scratch: np.ndarray
+    inv_dt: float
+    dt: float
+    clock: np.ndarray
+
+
+#: The force's group, name, and why a scene has no such pass (see :mod:`.forces`).
+Group = Wind
+NAME = "wind"
+ABSENT = "scene has no wind (or only still air)"
 
 
 @njit(inline="always", **KERNEL)
@@ -71,7 +102,7 @@ def air_velocity(rows: np.ndarray, modes: np.ndarray, w: int, x: float, y: float
 @njit(inline="always", **KERNEL)
 def wind_chunk(pos: np.ndarray, last: np.ndarray, wind: tuple, t: float, c: int) -> None:
     """Work item ``c``: a third of the wind force of each triangle of the c-th range into
-    ``wind.tforce``. ``wind`` is a :class:`~clothsim.sim.state.Wind`.
+    ``wind.tforce``. ``wind`` is a :class:`Wind`.
 
     First the triangles' centroids, mean velocities and cross products are gathered into
     ``wind.scratch`` rows; every later loop runs over those contiguous rows (vectorised). On the
@@ -202,12 +233,37 @@ def wind_chunks(pos: np.ndarray, last: np.ndarray, wind: tuple, t: float, c0: in
 
 
 @njit(**KERNEL)
+def work(wind: tuple, pos: np.ndarray, last: np.ndarray, substep: int, c0: int, c1: int) -> None:
+    """Work items c0..c1-1 at substep ``substep`` of the call (the force's ``work``)."""
+    wind_chunks(pos, last, wind, substep_time(wind.clock, substep, wind.dt), c0, c1)
+
+
+#: The force's ``gather`` (see :mod:`.forces`).
+gather = wind_gather
+
+
+@njit(**KERNEL)
 def add_wind(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, wind: tuple, t: float) -> None:
-    """forces += the wind's force on every point at time ``t`` (the other integrators' pass)."""
+    """forces += the wind's force on every point at time ``t`` (one call, for tests and tools)."""
     for c in range(CHUNKS):
         wind_chunk(pos, last, wind, t, c)
     for c in range(CHUNKS):
         wind_gather(wind, forces, c)
+
+
+def pack(sim: Any) -> Wind | None:
+    """The group for ``sim`` (a :class:`~clothsim.sim.Simulation`), None with no wind or only still
+    air (no pass: the same bits as none). The mesh's arrays are made once per simulation."""
+    rows, modes = wind_rows(sim.scene.winds)
+    if rows.shape[0] == 0:
+        return None
+    mesh = sim.pass_arrays.get("wind")
+    if mesh is None:
+        tris = triangles(sim.nw, sim.nh)
+        mesh = sim.pass_arrays["wind"] = (tris, *incidence(tris, sim.nw * sim.nh), np.zeros((3, tris.shape[1])),
+                                          np.zeros((12, tris.shape[1])))
+    dt = sim.dt
+    return Wind(rows, modes, *mesh, 1.0 / dt, dt, sim.clock)
 
 
 def triangles(nw: int, nh: int) -> np.ndarray:

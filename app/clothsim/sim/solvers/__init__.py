@@ -13,7 +13,7 @@ self-collision -> colliders -> Provot) with the integrator of ``sim.scene.simula
 
 Extra per-run state lives in ``sim.integrator_state`` (an :class:`IntegratorState`), created on
 first use from the current positions: the starting velocity is (x - x_last)/dt, zero at reset.
-``sim._last`` keeps meaning "position before the last substep" for every integrator, because
+``sim.last_positions`` keeps meaning "position before the last substep" for every integrator, because
 the collision kernels move points relative to it.
 """
 
@@ -60,7 +60,7 @@ def damping_factors(sim: Any) -> tuple[float, float, float]:
     phi = (1 - f)/(c dt) (-> 1 as c dt -> 0).
     """
     if sim.scene.simulation.damping_mode == "spec":
-        return float(sim._keep), 1.0, 0.0
+        return float(sim.plan.st.keep), 1.0, 0.0
     c = damping_rate(sim.scene.cloth.damping)
     cdt = c * sim.dt
     f = math.exp(-cdt)
@@ -72,8 +72,9 @@ class IntegratorState:
     """Velocities, spring arrays and scratch buffers of one run (copyable for replays)."""
 
     def __init__(self, sim: Any) -> None:
-        n = sim._pos.shape[1]
-        self.vel = (sim._pos - sim._last) / sim.dt
+        st = sim.plan.st
+        n = st.pos.shape[1]
+        self.vel = (st.pos - st.last) / sim.dt
         self.started = False
         self.iterations = int(getattr(sim, "xpbd_iterations", XPBD_ITERATIONS))
         self.mask = (~sim.pinned).astype(np.float64)
@@ -85,16 +86,16 @@ class IntegratorState:
     def bind_springs(self, sim: Any) -> None:
         """(Re)derive per-spring arrays when the enabled springs or ks changed."""
         sp = sim.springs
-        self._spring_k = sim._spring_k  # re-made by every re-plan (ks, enable_*, cuts)
+        self._spring_k = sim.spring_stiffness  # re-made by every re-plan (ks, enable_*, cuts)
         self.si = np.ascontiguousarray(sp.i)
         self.sj = np.ascontiguousarray(sp.j)
-        self.kspr = np.ascontiguousarray(sim._spring_k, dtype=np.float64)  # 0 for cut springs
+        self.kspr = np.ascontiguousarray(sim.spring_stiffness, dtype=np.float64)  # 0 for cut springs
         self.jac = np.zeros((6, len(sp)))
         self.lam = np.zeros(len(sp))
 
     def current(self, sim: Any) -> "IntegratorState":
         """This state, re-bound if the simulation re-planned its springs or stiffness."""
-        if self._spring_k is not sim._spring_k or self.mask.shape[0] != sim.pinned.shape[0]:
+        if self._spring_k is not sim.spring_stiffness or self.mask.shape[0] != sim.pinned.shape[0]:
             self.bind_springs(sim)
             self.inv_mass = self.mask / sim.mass
         return self
@@ -108,10 +109,10 @@ class IntegratorState:
 
 def post_args(sim: Any) -> Corrections:
     """The correction passes' group (:class:`~clothsim.sim.state.Corrections`)."""
-    plan = sim._kernel_args
+    plan = sim.plan
     # the contact mode is a pass of its own (plan.contact), not one of the hash's modes
-    mode = 0 if plan.contact is not None else sim._self_mode
-    return Corrections(sim.pinned, mode, sim.self_hash(), sim._stretch_limit, plan.col, plan.mov, plan.mesh,
+    mode = 0 if plan.contact is not None else sim.self_mode
+    return Corrections(sim.pinned, mode, sim.self_hash(), plan.st.stretch_limit, plan.col, plan.mov, plan.mesh,
                        plan.contact)
 
 
@@ -148,12 +149,14 @@ def _advance(sim: Any, steps: int) -> None:
     fix = has_corrections(post)
     f, phi, c = damping_factors(sim)
     dt = sim.dt
-    plan = sim._kernel_args
+    plan = sim.plan
+    cloth = plan.st
+    stream = (cloth.offsets, cloth.k, cloth.spring_rest, cloth.buf)
     verlet = symplectic = implicit = xpbd = None
     if name == "verlet":
         if not st.started:
-            accumulate_forces(sim._pos, sim._forces, sim._stream, sim.mass, sim._gravity)
-            verlet_start(sim._pos, sim._last, st.vel, sim._forces, sim.free, 1.0 / sim.mass, dt, c)
+            accumulate_forces(cloth.pos, cloth.forces, stream, sim.mass, cloth.gravity)
+            verlet_start(cloth.pos, cloth.last, st.vel, cloth.forces, sim.free, 1.0 / sim.mass, dt, c)
             st.started = True
         verlet = VerletRate(1.0 / sim.mass)
     elif name == "symplectic_euler":
@@ -167,9 +170,9 @@ def _advance(sim: Any, steps: int) -> None:
         xpbd = Xpbd(st.inv_mass, st.si, st.sj, st.kspr, st.lam, st.iterations)
     else:  # the scene validator only admits the four names above
         raise ValueError(f"unknown integrator {name!r}")
-    step = Step(sim._pos, sim._last, st.vel, sim._forces, sim.free, sim._blocks, sim._rest, sim.nw, sim.mass,
-                sim._gravity, dt, f, phi, fix)
-    skipped, iterations = integrate_substeps(steps, step, sim._stream, post, plan.wind, plan.pins, verlet,
+    step = Step(cloth.pos, cloth.last, st.vel, cloth.forces, sim.free, cloth.blocks, cloth.rest, sim.nw, sim.mass,
+                cloth.gravity, dt, f, phi, fix)
+    skipped, iterations = integrate_substeps(steps, step, stream, post, plan.forces, plan.pins, verlet,
                                              symplectic, implicit, xpbd)
     sim.colliders_skipped += skipped
     st.cg_iterations += iterations

@@ -1,5 +1,6 @@
 """One frame = ``steps`` substeps in a single compiled call, in the spec's substep order:
-forces (+ wind) -> integrate (+ moving pins) -> self-collision -> colliders -> Provot.
+forces (+ the registered forces: wind) -> integrate (+ moving pins) -> self-collision -> colliders
+-> Provot.
 
 The call is run by a team of threads (:mod:`clothsim.sim.team`) that share out each pass by
 the same work items as the per-pass parallel kernels (``spring_pass``, ``verlet``, ...) and meet
@@ -29,9 +30,9 @@ import numpy as np
 from numba import njit, prange, types
 
 from ...jit import CHUNKS, KERNEL, PARALLEL
-from ...jit.internals import call_native, native_address
+from ...jit.internals import call_native, native_address, stash, type_ref, unstash
 
-from ..passes.wind import wind_chunks, wind_gather
+from ..passes.forces import force_gather, force_work
 from ..passes.colliders import collide_part, member_bounds, merge_bounds, reach_colliders
 from ..passes.provot import provot_band, provot_bands, provot_cut
 from ..passes.springs import gather_chunk, spring_job
@@ -54,7 +55,7 @@ PASS_ALL = 31
 
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
-            col: tuple | None, mov: tuple | None, mesh: tuple | None, wind: tuple | None, pins: tuple | None,
+            col: tuple | None, mov: tuple | None, mesh: tuple | None, forces: tuple, pins: tuple | None,
             contact: tuple | None, sync: np.ndarray, passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes.
 
@@ -115,11 +116,9 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             lo, hi = share(spring_jobs, member, size)
             for job in range(lo, hi):
                 spring_job(pos, st.offsets, st.k, st.spring_rest, st.buf, job)
-            if wind is not None:
-                # the triangles' wind forces read only positions: same phase as the springs
-                now = substep_time(wind.clock, substep, wind.dt)
-                w0, w1 = share(CHUNKS, member, size)
-                wind_chunks(pos, last, wind, now, w0, w1)
+            # the other forces read only positions: same phase as the springs
+            w0, w1 = share(CHUNKS, member, size)
+            force_work(forces, pos, last, substep, w0, w1)
             if pins is not None:
                 offset_at(pins.times, pins.points, pins.velocity, substep_time(pins.clock, substep + 1, pins.dt), offset)
             gen = barrier(sync, size, gen)
@@ -132,8 +131,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     hist[member] = 0
             for c in range(lo, hi):
                 gather_chunk(st.offsets, st.buf, st.mass, st.gravity, st.forces, c)
-                if wind is not None:
-                    wind_gather(wind, st.forces, c)
+                force_gather(forces, st.forces, c)
                 verlet_chunk(pos, last, st.forces, st.pins, st.h2, st.keep, c)
                 if pins is not None:
                     pin_chunk(pos, last, pins, offset, c)
@@ -305,26 +303,18 @@ def kernel_addresses(plan: Plan, sync: np.ndarray) -> tuple[int, int, int]:
     return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (*plan, sync)), i64))
 
 
+@njit(**KERNEL)
+def _enter(me: int, working: int, address: int, proto: types.TypeRef) -> int:
+    """Member ``me`` of a team of ``working``: :func:`_member` with the arguments that
+    :func:`run_substeps` left at ``address`` (first the member's address); returns 1 if it failed."""
+    member, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync, passes = unstash(address, proto)
+    return call_native(member, (me, working, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync,
+                                passes))
+
+
 @njit(**PARALLEL)
-def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
-                 mov: tuple | None, mesh: tuple | None, wind: tuple | None, pins: tuple | None,
-                 contact: tuple | None, sync: np.ndarray, size: int, passes: int, member: int) -> int:
-    """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
-
-    ``st``, ``spec``, ``grid``, ``col``, ``wind``, ``pins`` and ``contact`` are the named tuples of
-    :mod:`clothsim.sim.state`, ``mov`` the tracks of moving colliders
-    (:class:`clothsim.sim.passes.colliders.moving.Motion`) and ``mesh`` the
-    :class:`~clothsim.sim.passes.colliders.meshgrid.MeshGroup`; all but ``st`` are ``None`` for a pass the scene
-    does not use (``mesh`` needs ``col``). ``sync`` is
-    :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
-    :mod:`clothsim.sim.team`); the result does not depend on it. After the call
-    ``sync[team.ABORT]`` set means the frame was given up half-way (restore and run it alone).
-
-    ``passes`` (PASS_* bits) runs only some passes, for :mod:`clothsim.sim.profile`; ``member``
-    is the first of :func:`kernel_addresses` for these groups. ``sync[team.FAILED]`` set after the call means a
-    member failed (it could not allocate its work space).
-    """
-    st.skips[0] = 0
+def _launch(address: int, proto: types.TypeRef, sync: np.ndarray, size: int) -> None:
+    """The team: ``size`` members of :func:`_enter` (fewer if the roll call finds fewer threads)."""
     sync[:] = 0
     for m in prange(size):
         working = roll_call(sync, size)
@@ -333,7 +323,35 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
             me = 0
             if working == size:
                 me = np.int64(m)
-            if call_native(member, (me, working, steps, st, spec, grid, col, mov, mesh, wind, pins, contact, sync, passes)) != 0:
+            if _enter(me, working, address, proto) != 0:
                 sync[FAILED] = 1
                 atomic_cas(sync, ABORT, 0, 1)
+
+
+@njit(**KERNEL)
+def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
+                 mov: tuple | None, mesh: tuple | None, forces: tuple, pins: tuple | None,
+                 contact: tuple | None, sync: np.ndarray, size: int, passes: int, member: int) -> int:
+    """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
+
+    ``st``, ``spec``, ``grid``, ``col``, ``pins`` and ``contact`` are the named tuples of
+    :mod:`clothsim.sim.state`, ``mov`` the tracks of moving colliders
+    (:class:`clothsim.sim.passes.colliders.moving.Motion`), ``mesh`` the
+    :class:`~clothsim.sim.passes.colliders.meshgrid.MeshGroup` and ``forces`` the groups of
+    :mod:`clothsim.sim.passes.forces` the scene uses; all but ``st`` and ``forces`` are ``None`` for
+    a pass the scene does not use (``mesh`` needs ``col``). ``sync`` is
+    :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
+    :mod:`clothsim.sim.team`); the result does not depend on it. After the call
+    ``sync[team.ABORT]`` set means the frame was given up half-way (restore and run it alone).
+
+    ``passes`` (PASS_* bits) runs only some passes, for :mod:`clothsim.sim.profile`; ``member``
+    is the first of :func:`kernel_addresses` for these groups. ``sync[team.FAILED]`` set after the call means a
+    member failed (it could not allocate its work space).
+
+    The members get their arguments by address (:func:`~clothsim.jit.internals.stash`): a
+    parallel loop cannot hand its threads a tuple of groups such as ``forces``.
+    """
+    st.skips[0] = 0
+    args = (member, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync, passes)
+    _launch(stash(args), type_ref(args), sync, size)
     return st.skips[0]

@@ -1,13 +1,14 @@
 """The substep of every integrator but the spec's fast path, as one ordered list of passes:
 
-    forces (springs + gravity) -> wind -> the integrator's advance -> moving pins
+    forces (springs + gravity) -> the registered forces (wind) -> the integrator's advance -> moving pins
     -> (XPBD: its constraint solve) -> corrections (self-collision, colliders, Provot)
     -> velocities re-derived from the corrected positions
 
 An integrator is only its advance rule, a group of its own (:class:`~.verlet.VerletRate`,
 :class:`~.symplectic.Symplectic`, :class:`~.implicit.Implicit`, :class:`~.xpbd.Xpbd`): exactly one
 is given, the others are ``None``, and Numba prunes the branches of the absent ones before typing,
-so each integrator compiles only its own code, as each optional pass (wind, pins, colliders) does.
+so each integrator compiles only its own code, as each optional pass (pins, colliders) does; the
+forces of :mod:`..passes.forces` come as one tuple of the groups the scene uses.
 The spec's fast path runs the same passes' work items in the thread team (:mod:`.frame`).
 """
 
@@ -19,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from ...jit import EXACT, KERNEL
-from ..passes.wind import add_wind
+from ..passes.forces import add_forces
 from ..passes.springs import accumulate_forces
 from ..passes.corrections import corrections
 from ..clock import substep_time
@@ -67,19 +68,20 @@ def velocities_from_positions(pos: np.ndarray, last: np.ndarray, vel: np.ndarray
 
 
 @njit(**EXACT)
-def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, wind: tuple | None, pins: tuple | None,
+def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, forces: tuple, pins: tuple | None,
                        verlet: VerletRate | None, symplectic: Symplectic | None, implicit: Implicit | None,
                        xpbd: Xpbd | None) -> tuple[int, int]:
     """``steps`` substeps with the one integrator whose group is given; returns (colliders
     skipped, CG iterations). ``post`` is the :class:`~clothsim.sim.state.Corrections` group,
-    ``wind`` and ``pins`` the :mod:`clothsim.sim.state` groups, None when the scene has none."""
+    ``forces`` the groups of :mod:`clothsim.sim.passes.forces` the scene uses, ``pins`` the
+    :class:`~clothsim.sim.state.PinMotion` group or None."""
     pos = s.pos
     last = s.last
     skipped = 0
     iterations = 0
     offset = np.empty(3)
     for substep in range(steps):
-        # forces: XPBD takes the springs as constraints, and only the wind as a force. (Each test
+        # forces: XPBD takes the springs as constraints, and only the other forces as forces. (Each test
         # names a group that is None for XPBD: Numba prunes a branch on an argument that is None,
         # not one on an argument that is not, so XPBD then compiles no spring-force code.)
         if verlet is not None:
@@ -88,10 +90,10 @@ def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, wind: tu
             accumulate_forces(pos, s.forces, stream, s.mass, s.gravity)
         if implicit is not None:
             accumulate_forces(pos, s.forces, stream, s.mass, s.gravity)
-        if wind is not None:
+        if len(forces) > 0:
             if xpbd is not None:
                 s.forces[:, :] = 0.0
-            add_wind(pos, last, s.forces, wind, substep_time(wind.clock, substep, wind.dt))
+            add_forces(forces, pos, last, s.forces, substep)
         # the integrator's advance
         if verlet is not None:
             verlet_rate_step(pos, last, s.forces, s.free, 1.0 / s.mass, s.dt, s.f, s.phi)
@@ -102,7 +104,7 @@ def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, wind: tu
                                           implicit.sj, s.rest, implicit.kspr, implicit.jac, implicit.scratch, s.mass,
                                           s.dt, implicit.c, implicit.keep_after, implicit.tol, implicit.max_iter)
         if xpbd is not None:
-            if wind is not None:
+            if len(forces) > 0:
                 kick(s.vel, s.forces, s.free, xpbd.w, s.dt * s.phi)
             predict(pos, last, s.vel, s.free, s.gravity, s.dt, s.f, s.phi)
         # moving pins

@@ -30,7 +30,7 @@ from numba import njit
 from ....jit import KERNEL
 from .shapes import CAPSULE_CARRY, CUBOID_CARRY, samples
 from ....colliders import kind_number, scene_colliders
-from ...clock import substep_time, track_at as position_at
+from ...clock import call_time, substep_time, track_at as position_at
 
 #: Kind numbers of a moving collider: places in the registry of kinds (:data:`clothsim.colliders.KINDS`).
 KIND_SPHERE, KIND_PLANE, KIND_CAPSULE, KIND_CUBOID, KIND_MESH = (kind_number(k) for k in ("sphere", "plane", "capsule",
@@ -157,17 +157,21 @@ def update_poses(motion: Motion | None, spheres: np.ndarray, planes: np.ndarray,
     record its displacement over that substep (its carry)."""
     if motion is None:
         return
-    t0 = substep_time(motion.clock, substep, motion.dt)
-    t1 = substep_time(motion.clock, substep + 1, motion.dt)
+    # (two readings of the one clock: see clothsim.sim.clock)
+    dt = motion.dt
+    t0 = call_time(motion.clock, dt) + substep * dt
+    t1 = t0 + dt
+    s0 = substep_time(motion.clock, substep, dt)
+    s1 = substep_time(motion.clock, substep + 1, dt)
     p0 = motion.scratch[0]
     p1 = motion.scratch[1]
     for m in range(motion.kind.shape[0]):
         a = motion.span[m, 0]
         b = motion.span[m, 1]
-        position_at(motion.times[a:b], motion.points[a:b], motion.velocity[m], t0, p0)
-        position_at(motion.times[a:b], motion.points[a:b], motion.velocity[m], t1, p1)
         kind = motion.kind[m]
         r = motion.row[m]
+        position_at(motion.times[a:b], motion.points[a:b], motion.velocity[m], s0 if kind == KIND_MESH else t0, p0)
+        position_at(motion.times[a:b], motion.points[a:b], motion.velocity[m], s1 if kind == KIND_MESH else t1, p1)
         if kind == KIND_MESH:
             for c in range(3):
                 motion.mesh_pose[r, c] = p0[c]

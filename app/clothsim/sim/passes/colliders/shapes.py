@@ -53,9 +53,10 @@ def samples(dx: float, dy: float, dz: float, step: float) -> int:
 
 
 @njit(**KERNEL)
-def capsule_surface(x: float, y: float, z: float, row: np.ndarray) -> tuple[bool, float, float, float]:
+def capsule_surface(x: float, y: float, z: float, row: np.ndarray, offset: float) -> tuple[bool, float, float, float]:
     """(inside, surface point): the point of the capsule's surface nearest (x, y, z) when it is
-    inside (a point exactly on the axis has no direction and is left alone, as at a sphere's centre)."""
+    inside (a point exactly on the axis has no direction and is left alone, as at a sphere's
+    centre). ``offset`` is unused: points land on a capsule's surface, as on a sphere's."""
     ax = row[0]
     ay = row[1]
     az = row[2]
@@ -110,39 +111,45 @@ def cuboid_surface(x: float, y: float, z: float, row: np.ndarray, offset: float)
     return True, x + row[6 + k] * m, y + row[9 + k] * m, z + row[12 + k] * m
 
 
+@njit(inline="always", **KERNEL)
+def _push_out(pos: np.ndarray, last: np.ndarray, free: np.ndarray, row: np.ndarray, keep: float, step: float,
+              carry_at: int, surface: Any, offset: float) -> None:
+    """One closed shape's pass: each free point's relative path from its carried last position,
+    sampled ``step`` apart; the first sample ``surface`` finds inside is pushed out, keeping
+    ``keep`` of the relative motion (friction)."""
+    cx = row[carry_at]
+    cy = row[carry_at + 1]
+    cz = row[carry_at + 2]
+    for k in range(free.shape[0]):
+        p = free[k]
+        lx = last[0, p] + cx
+        ly = last[1, p] + cy
+        lz = last[2, p] + cz
+        x = pos[0, p]
+        y = pos[1, p]
+        z = pos[2, p]
+        n = samples(x - lx, y - ly, z - lz, step)
+        for j in range(1, n + 1):
+            if j < n:
+                s = j / n
+                hit, tx, ty, tz = surface(lx + (x - lx) * s, ly + (y - ly) * s, lz + (z - lz) * s, row, offset)
+            else:
+                hit, tx, ty, tz = surface(x, y, z, row, offset)
+            if hit:
+                pos[0, p] = lx + (tx - lx) * keep
+                pos[1, p] = ly + (ty - ly) * keep
+                pos[2, p] = lz + (tz - lz) * keep
+                break
+
+
 @njit(**KERNEL)
 def collide_capsules(pos: np.ndarray, last: np.ndarray, free: np.ndarray, capsules: np.ndarray,
                      on: np.ndarray) -> None:
     """Push the points inside each reachable capsule to its surface, with friction (see module)."""
     for o in range(capsules.shape[0]):
-        if not on[o]:
-            continue
-        row = capsules[o]
-        keep = 1.0 - row[7]
-        step = 0.5 * row[6]
-        cx = row[CAPSULE_CARRY]
-        cy = row[CAPSULE_CARRY + 1]
-        cz = row[CAPSULE_CARRY + 2]
-        for k in range(free.shape[0]):
-            p = free[k]
-            lx = last[0, p] + cx
-            ly = last[1, p] + cy
-            lz = last[2, p] + cz
-            x = pos[0, p]
-            y = pos[1, p]
-            z = pos[2, p]
-            n = samples(x - lx, y - ly, z - lz, step)
-            for j in range(1, n + 1):
-                if j < n:
-                    s = j / n
-                    hit, tx, ty, tz = capsule_surface(lx + (x - lx) * s, ly + (y - ly) * s, lz + (z - lz) * s, row)
-                else:
-                    hit, tx, ty, tz = capsule_surface(x, y, z, row)
-                if hit:
-                    pos[0, p] = lx + (tx - lx) * keep
-                    pos[1, p] = ly + (ty - ly) * keep
-                    pos[2, p] = lz + (tz - lz) * keep
-                    break
+        if on[o]:
+            row = capsules[o]
+            _push_out(pos, last, free, row, 1.0 - row[7], 0.5 * row[6], CAPSULE_CARRY, capsule_surface, 0.0)
 
 
 @njit(**KERNEL)
@@ -150,35 +157,10 @@ def collide_cuboids(pos: np.ndarray, last: np.ndarray, free: np.ndarray, cuboids
                     offset: float) -> None:
     """Push the points inside each reachable box out of its nearest face, with friction (see module)."""
     for o in range(cuboids.shape[0]):
-        if not on[o]:
-            continue
-        row = cuboids[o]
-        keep = 1.0 - row[15]
-        step = 0.5 * min(row[3], min(row[4], row[5]))
-        cx = row[CUBOID_CARRY]
-        cy = row[CUBOID_CARRY + 1]
-        cz = row[CUBOID_CARRY + 2]
-        for k in range(free.shape[0]):
-            p = free[k]
-            lx = last[0, p] + cx
-            ly = last[1, p] + cy
-            lz = last[2, p] + cz
-            x = pos[0, p]
-            y = pos[1, p]
-            z = pos[2, p]
-            n = samples(x - lx, y - ly, z - lz, step)
-            for j in range(1, n + 1):
-                if j < n:
-                    s = j / n
-                    hit, tx, ty, tz = cuboid_surface(lx + (x - lx) * s, ly + (y - ly) * s, lz + (z - lz) * s, row,
-                                                     offset)
-                else:
-                    hit, tx, ty, tz = cuboid_surface(x, y, z, row, offset)
-                if hit:
-                    pos[0, p] = lx + (tx - lx) * keep
-                    pos[1, p] = ly + (ty - ly) * keep
-                    pos[2, p] = lz + (tz - lz) * keep
-                    break
+        if on[o]:
+            row = cuboids[o]
+            _push_out(pos, last, free, row, 1.0 - row[15], 0.5 * min(row[3], min(row[4], row[5])), CUBOID_CARRY,
+                      cuboid_surface, offset)
 
 
 @njit(**KERNEL)
