@@ -227,3 +227,29 @@ def test_every_kernel_says_its_floating_point_rules() -> None:
             if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "njit":
                 stars = {k.value.id for k in node.keywords if k.arg is None and isinstance(k.value, ast.Name)}
                 assert stars & allowed or any(k.arg == "fastmath" for k in node.keywords), (path, node.lineno)
+
+
+def test_two_versions_sharing_a_cache_folder_never_load_each_others_code(tmp_path: Path,
+                                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    # Numba numbers a kernel's data files only: a process of another version of the package found
+    # the index stale, took file 1 again and overwrote it, and a process of this version that had
+    # just read its index then loaded the other version's code.
+    from numba.core import caching
+
+    from clothsim.jit import internals
+
+    mine = internals.package_stamp()
+    other = "b" * 64
+    ours = caching.IndexDataCacheFile(str(tmp_path), "kernel-1.py311", mine)
+    ours.save("key", "this version's code")
+    index = ours._load_index()  # a loader of this version has read its index...
+    monkeypatch.setattr(internals, "package_stamp", lambda: other)
+    theirs = caching.IndexDataCacheFile(str(tmp_path), "kernel-1.py311", other)
+    theirs.save("key", "the other version's code")  # ...when the other version saves
+    monkeypatch.setattr(internals, "package_stamp", lambda: mine)
+    try:
+        loaded = ours._load_data(index["key"])
+    except OSError:  # its file is gone: a miss, and the kernel compiles again
+        loaded = None
+    assert loaded in (None, "this version's code")
+    assert theirs.load("key") == "the other version's code"

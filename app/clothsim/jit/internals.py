@@ -114,18 +114,56 @@ def _locked_save(self: Any, key: Any, data: Any) -> None:
         if name is None:
             taken = set(overloads.values())
             number = 1
-            while self._data_name(number) in taken:
+            while _data_name(self, number) in taken:
                 number += 1
-            name = self._data_name(number)
+            name = _data_name(self, number)
         self._save_data(name, data)
         if overloads.get(key) != name:
             overloads[key] = name
             self._save_index(overloads)
+            _drop_other_versions(self)
     finally:
         os.close(fd)  # releases the lock
 
 
 _numba_save = caching.IndexDataCacheFile.save
+
+
+def _data_name(cache: Any, number: int) -> str:
+    """Data file ``number`` of a kernel: for this package's kernels the name carries the package's
+    stamp, so that processes of two versions of the package sharing a cache folder (an upgrade
+    under a running sweep; two checkouts' tools) never write each other's files. Numba numbers
+    them only, and a process of the other version, finding the index stale, took number 1 again
+    and overwrote the code an index of this version named: a later process then ran the other
+    version's code (seen: a bit-identity table run beside a run of an edited checkout)."""
+    stamp = cache._source_stamp
+    if stamp == package_stamp():
+        return cache._data_name_pattern.format(number=number).replace(".nbc", f".{stamp[:16]}.nbc")
+    return cache._data_name(number)
+
+
+def _drop_other_versions(cache: Any) -> None:
+    """Delete this kernel's data files of other versions of the package (a process of that
+    version still running finds its file gone and compiles again: Numba's load treats a missing
+    file as a miss)."""
+    stamp = cache._source_stamp
+    if stamp != package_stamp():
+        return
+    base = cache._index_name[: -len(".nbi")]
+    mine = f".{stamp[:16]}.nbc"
+    try:
+        names = os.listdir(cache._cache_path)
+    except OSError:
+        return
+    for name in names:
+        if name.startswith(base + ".") and name.endswith(".nbc") and not name.endswith(mine):
+            rest = name[len(base) + 1 : -len(".nbc")]
+            # base.N.nbc (Numba's own naming) or base.N.<stamp>.nbc: not another kernel's base.M...
+            if rest.split(".")[0].isdigit() and rest.count(".") <= 1:
+                try:
+                    os.remove(os.path.join(cache._cache_path, name))
+                except OSError:
+                    pass
 
 
 def install_shared_cache() -> None:
@@ -244,8 +282,14 @@ def missing_private_api() -> list[str]:
         missing.append("numba.core.caching.CacheImpl._locator_classes")
     if getattr(caching, "_SourceFileBackedLocatorMixin", None) is None:
         missing.append("numba.core.caching._SourceFileBackedLocatorMixin")
-    for name in ("_load_index", "_save_index", "_save_data", "_data_name"):
-        if not hasattr(caching.IndexDataCacheFile, name):
+    try:
+        sample = caching.IndexDataCacheFile("/nonexistent", "kernel", "stamp")  # sets names only, reads nothing
+    except Exception:  # noqa: BLE001 - a changed constructor is a missing API too
+        sample = None
+        missing.append("numba.core.caching.IndexDataCacheFile(cache_path, filename_base, source_stamp)")
+    for name in ("_load_index", "_save_index", "_save_data", "_data_name", "_data_name_pattern", "_index_name",
+                 "_cache_path", "_source_stamp"):
+        if not hasattr(caching.IndexDataCacheFile, name) and not hasattr(sample, name):
             missing.append(f"numba.core.caching.IndexDataCacheFile.{name}")
     for name in ("alloca_once", "alloca_once_value", "unpack_tuple", "get_null_value", "get_item_pointer",
                  "get_or_insert_function", "gep_inbounds"):

@@ -32,14 +32,26 @@ class Compiled:
     depth: int
 
 
+def _group_name(arg: Any) -> str | None:
+    """A frame kernel's state group by name: "-" for a pass the scene does not use, the names
+    joined by "+" for a tuple of groups (the forces), None for any other argument."""
+    cls = getattr(arg, "instance_class", None)
+    if cls is not None:
+        return cls.__name__
+    if str(arg) == "none":
+        return "-"
+    items = getattr(arg, "types", None)
+    if isinstance(items, tuple) and all(getattr(t, "instance_class", None) is not None for t in items):
+        return "+".join(t.instance_class.__name__ for t in items) or "-"
+    return None
+
+
 def _kernel_name(data: dict[str, Any]) -> tuple[str, str]:
     disp = data.get("dispatcher")
     func = getattr(disp, "py_func", None)
     name = f"{func.__module__}.{func.__qualname__}" if func is not None else str(disp)
     args = data.get("args") or ()
-    # the frame kernel's state groups by name ("-" for a pass the scene does not use)
-    groups = [getattr(getattr(a, "instance_class", None), "__name__", None) or ("-" if str(a) == "none" else None)
-              for a in args]
+    groups = [_group_name(a) for a in args]
     variant = ", ".join(g for g in groups if g) if any(g and g != "-" for g in groups) else ""
     return name, variant
 
