@@ -223,3 +223,23 @@ def test_small_cloths_off_the_spec_path_run_on_one_thread(n: int, expected: int,
     sim.step(1)
     assert seen == [expected]
     assert numba.get_num_threads() == 2
+
+
+def test_implicit_euler_gives_the_same_bits_compiled_or_loaded(tmp_path) -> None:
+    # Its CG sums once used fast-math reassociation, and how LLVM split a sum depended on whether
+    # the solver was compiled in the same process as its caller or loaded from the cache: a cold
+    # and a warm run of the same scene differed in the last bits.
+    import os
+    import subprocess
+    import sys
+
+    code = ("import hashlib; from clothsim.scene import load_scene; from clothsim.sim import Simulation; "
+            "s = Simulation(load_scene('pinned2').with_simulation(integrator='implicit_euler', "
+            "self_collision='off')); s.step(40); print(hashlib.sha256(s.positions.tobytes()).hexdigest())")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache")}
+    runs = [subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+            for _ in ("cold", "warm")]
+    for r in runs:
+        assert r.returncode == 0, r.stderr
+    assert list((tmp_path / "cache").rglob("*.nbi"))
+    assert runs[0].stdout == runs[1].stdout

@@ -6,7 +6,7 @@ keep one) velocities. Two checkouts on the same machine that print the same tabl
 same thing, bit for bit. Usage (from a checkout, with its own environment):
 
     python tests/tools/bitid.py > table.txt
-    diff table-a.txt table-b.txt
+    python tests/tools/bitid.py --compare table-a.txt table-b.txt   # rows equal / differing, per scene
 
 A run that blows up prints a hash of its error message instead, so a change in where it blows up
 shows too.
@@ -60,16 +60,50 @@ def run(name: str, integrator: str, damping: str, mode: str, frames: int) -> str
     return digest(sim)
 
 
+def read_table(path: str) -> dict[tuple[str, str, str], str]:
+    """A printed table as {(scene, integrator/damping, mode): hash}."""
+    rows = {}
+    for line in Path(path).read_text().splitlines():
+        scene, integration, rest = line[:14].strip(), line[14:36].strip(), line[36:]
+        mode = next((m for m in SELF_COLLISION_MODES if rest.startswith(m)), None)
+        if scene and integration and mode:
+            rows[(scene, integration, mode)] = rest[len(mode):].strip()
+    return rows
+
+
+def compare(a_path: str, b_path: str) -> int:
+    """Print, per scene, how many rows both tables have and how many are equal; then each row
+    that differs."""
+    a, b = read_table(a_path), read_table(b_path)
+    common = [k for k in b if k in a]
+    scenes = sorted({k[0] for k in common})
+    print(f"{'scene':<14}{'rows':>5}{'equal':>7}")
+    for scene in scenes:
+        rows = [k for k in common if k[0] == scene]
+        print(f"{scene:<14}{len(rows):>5}{sum(a[k] == b[k] for k in rows):>7}")
+    print(f"{'all':<14}{len(common):>5}{sum(a[k] == b[k] for k in common):>7}")
+    for k in common:
+        if a[k] != b[k]:
+            print("differs:", *k)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--compare", nargs=2, metavar=("A", "B"), help="compare two printed tables instead of running")
     p.add_argument("--frames", type=int, default=None,
                    help=f"frames per combination (default: {DEFAULT_FRAMES}, more for the scenes in FRAMES)")
     p.add_argument("--scenes", nargs="*", help="bundled scene names (default: every scenes/*.json)")
+    p.add_argument("--integrators", nargs="*", help="integrator/damping pairs, e.g. implicit_euler/spec (default: all)")
     args = p.parse_args(argv)
+    if args.compare:
+        return compare(*args.compare)
     names = args.scenes or sorted(f.stem for f in SCENES.glob("*.json"))
     began = time.perf_counter()
     for name in names:
         for integrator, damping in INTEGRATIONS:
+            if args.integrators and f"{integrator}/{damping}" not in args.integrators:
+                continue
             for mode in SELF_COLLISION_MODES:
                 t = time.perf_counter()
                 h = run(name, integrator, damping, mode, args.frames or FRAMES.get(name, DEFAULT_FRAMES))
