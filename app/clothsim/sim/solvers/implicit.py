@@ -14,7 +14,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...jit import EXACT, KERNEL
+from ...jit import KERNEL
 
 
 class Implicit(NamedTuple):
@@ -93,30 +93,13 @@ def apply_stiffness(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, y: np.ndarr
         out[2, b] -= gz
 
 
-@njit(**EXACT)
+@njit(**KERNEL)
 def _dot(x: np.ndarray, y: np.ndarray) -> float:
-    """Sum of x * y in a fixed order: four running sums, point k into sum k mod 4, added pairwise.
-
-    Written out rather than left to fast-math: with reassociation allowed, how LLVM split the
-    reduction depended on whether this loop was compiled with its caller in the same process or
-    loaded from the cache, and implicit Euler's numbers changed between a cold and a warm run.
-    Four explicit sums keep most of the vectorised speed without reassociation (see
-    docs/performance.md)."""
-    s0 = 0.0
-    s1 = 0.0
-    s2 = 0.0
-    s3 = 0.0
-    n = x.shape[1]
-    m = n - n % 4
+    acc = 0.0
     for ax in range(3):
-        for p in range(0, m, 4):
-            s0 += x[ax, p] * y[ax, p]
-            s1 += x[ax, p + 1] * y[ax, p + 1]
-            s2 += x[ax, p + 2] * y[ax, p + 2]
-            s3 += x[ax, p + 3] * y[ax, p + 3]
-        for p in range(m, n):
-            s0 += x[ax, p] * y[ax, p]
-    return (s0 + s1) + (s2 + s3)
+        for p in range(x.shape[1]):
+            acc += x[ax, p] * y[ax, p]
+    return acc
 
 
 @njit(**KERNEL)
