@@ -114,7 +114,7 @@ def test_a_frame_given_up_half_way_is_restored_and_run_alone(monkeypatch: pytest
     monkeypatch.setattr(team, "team_size", lambda: 2)
     import clothsim.sim.simulation as simulation_module
 
-    monkeypatch.setattr(simulation_module, "run_substeps", lost_member)
+    monkeypatch.setattr(simulation_module, "substeps_kernel", lambda plan: lost_member)
     sim = clothsim.Simulation(scene)
     sim.step(3)
     assert sim.team.aborted_frames == 1

@@ -285,7 +285,7 @@ def _addresses(argtypes: tuple) -> tuple[int, int, int]:
             repel_slots.compile(repel)
         if collide is not None:
             collide_meshes_chunk.compile(collide)
-        run_substeps.compile((i64, *groups, argtypes[3 + len(Plan._fields)], i64, i64, i64))
+        substeps_kernel(groups).compile((i64, *groups, argtypes[3 + len(Plan._fields)], i64, i64, i64))
         warm_side_kernels()
 
     compile_elsewhere(_member, argtypes, meanwhile)
@@ -312,23 +312,36 @@ def _enter(me: int, working: int, address: int, proto: types.TypeRef) -> int:
                                 passes))
 
 
+@njit(inline="always", **KERNEL)
+def _turn(m: int, size: int, member: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
+          col: tuple | None, mov: tuple | None, mesh: tuple | None, forces: tuple, pins: tuple | None,
+          contact: tuple | None, sync: np.ndarray, passes: int) -> None:
+    """Iteration ``m`` of the team's parallel loop: answer the roll call and run the member."""
+    working = roll_call(sync, size)
+    if working != 0:
+        # one call site, with int64 arguments: one compiled _member whoever runs it
+        me = 0
+        if working == size:
+            me = np.int64(m)
+        if call_native(member, (me, working, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync,
+                                passes)) != 0:
+            sync[FAILED] = 1
+            atomic_cas(sync, ABORT, 0, 1)
+
+
+@njit(inline="always", **KERNEL)
+def _stashed_turn(m: int, size: int, address: int, proto: types.TypeRef, sync: np.ndarray) -> None:
+    working = roll_call(sync, size)
+    if working != 0:
+        me = 0
+        if working == size:
+            me = np.int64(m)
+        if _enter(me, working, address, proto) != 0:
+            sync[FAILED] = 1
+            atomic_cas(sync, ABORT, 0, 1)
+
+
 @njit(**PARALLEL)
-def _launch(address: int, proto: types.TypeRef, sync: np.ndarray, size: int) -> None:
-    """The team: ``size`` members of :func:`_enter` (fewer if the roll call finds fewer threads)."""
-    sync[:] = 0
-    for m in prange(size):
-        working = roll_call(sync, size)
-        if working != 0:
-            # one call site, with int64 arguments: one compiled _member whoever runs it
-            me = 0
-            if working == size:
-                me = np.int64(m)
-            if _enter(me, working, address, proto) != 0:
-                sync[FAILED] = 1
-                atomic_cas(sync, ABORT, 0, 1)
-
-
-@njit(**KERNEL)
 def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
                  mov: tuple | None, mesh: tuple | None, forces: tuple, pins: tuple | None,
                  contact: tuple | None, sync: np.ndarray, size: int, passes: int, member: int) -> int:
@@ -348,10 +361,38 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
     is the first of :func:`kernel_addresses` for these groups. ``sync[team.FAILED]`` set after the call means a
     member failed (it could not allocate its work space).
 
-    The members get their arguments by address (:func:`~clothsim.jit.internals.stash`): a
-    parallel loop cannot hand its threads a tuple of groups such as ``forces``.
     """
+    st.skips[0] = 0
+    sync[:] = 0
+    for m in prange(size):
+        _turn(m, size, member, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync, passes)
+    return st.skips[0]
+
+
+@njit(**PARALLEL)
+def _launch(address: int, proto: types.TypeRef, sync: np.ndarray, size: int) -> None:
+    sync[:] = 0
+    for m in prange(size):
+        _stashed_turn(m, size, address, proto, sync)
+
+
+@njit(**KERNEL)
+def run_substeps_stashed(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
+                         mov: tuple | None, mesh: tuple | None, forces: tuple, pins: tuple | None,
+                         contact: tuple | None, sync: np.ndarray, size: int, passes: int, member: int) -> int:
+    """:func:`run_substeps` for a plan with forces (``forces`` not empty). A parallel loop hands its
+    threads each value it reads as an argument of Numba's gufunc, which takes arrays, scalars and
+    tuples of them but not a tuple of groups, so the members get their arguments by address
+    (:func:`~clothsim.jit.internals.stash`). That costs the team time (see docs/performance.md,
+    Forces in the thread team), so a plan without forces keeps :func:`run_substeps`."""
     st.skips[0] = 0
     args = (member, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync, passes)
     _launch(stash(args), type_ref(args), sync, size)
     return st.skips[0]
+
+
+def substeps_kernel(plan: Plan):  # noqa: ANN201
+    """The frame kernel for ``plan`` (the groups, or their Numba types): :func:`run_substeps`, or
+    :func:`run_substeps_stashed` when the plan has forces."""
+    forces = plan.forces
+    return run_substeps_stashed if len(getattr(forces, "types", forces)) else run_substeps
