@@ -256,3 +256,25 @@ def test_a_list_index_in_other_digits_is_one_line(tmp_path, index):
     assert error_line(r) == (f"clothsim: error: --set sphere.{index}.radius: {index!r} is not a list index "
                              "(an index is written with the digits 0-9, e.g. sphere.1.radius)")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_ctrl_c_while_the_workers_start_is_held_and_raised():
+    # The workers start with SIGINT blocked; a Ctrl-C reaching the command meanwhile used to be
+    # ignored there, and the sweep ran on.
+    import signal
+    from concurrent.futures import Future
+
+    from clothsim.sweeps import engines
+
+    class Pool:
+        def submit(self, fn):  # noqa: ANN001, ANN202
+            os.kill(os.getpid(), signal.SIGINT)
+            done = Future()
+            done.set_result(fn())
+            return done
+
+    before = signal.getsignal(signal.SIGINT)
+    with pytest.raises(KeyboardInterrupt):
+        engines._start_workers(Pool(), 2)
+    assert signal.getsignal(signal.SIGINT) is before
+    assert not signal.pthread_sigmask(signal.SIG_BLOCK, set()) & {signal.SIGINT}

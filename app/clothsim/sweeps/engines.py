@@ -109,22 +109,30 @@ def _start_workers(executor: ProcessPoolExecutor, count: int) -> None:
     """Start every worker now, with Ctrl-C ignored from their first instruction, and wait until
     they answer: a worker that cannot start is one clear error here, not a run lost later.
 
-    The pool starts a process per submitted task until it has ``count``; a process started while
-    SIGINT is ignored inherits that (across exec), so a Ctrl-C during its start-up cannot print a
-    traceback from inside multiprocessing. The command's own handler is back right after.
+    The pool starts a process per submitted task until it has ``count``. Meanwhile SIGINT is
+    blocked in this thread, and a process started then inherits that (across exec): a Ctrl-C
+    during a worker's start-up cannot print a traceback from inside multiprocessing, and the
+    worker ignores it once started. A Ctrl-C that reaches this process meanwhile is held, not
+    dropped, and raised as soon as the workers are up (it used to be ignored here, and a Ctrl-C
+    in that window was lost: the sweep ran on).
     """
     import threading
     from concurrent.futures import wait
 
     main = threading.current_thread() is threading.main_thread()
     previous = signal.getsignal(signal.SIGINT) if main else None
+    held: list[int] = []
     if main and previous is not None:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         started = [executor.submit(os.getpid) for _ in range(count)]
     finally:
         if main and previous is not None:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
             signal.signal(signal.SIGINT, previous)
+    if held:
+        raise KeyboardInterrupt
     wait(started)
     if any(f.exception() is not None for f in started):
         raise ClothsimError(f"the sweep's worker processes stopped while starting{_start_hint()}")
