@@ -13,7 +13,8 @@ from numba import njit
 import clothsim
 from clothsim.errors import FieldError, SceneError
 from clothsim.scene import scene_from_dict
-from clothsim.sim.passes.wind import Wind, add_wind, air_velocity, incidence, triangles
+from clothsim.sim.passes.forces import add_forces
+from clothsim.sim.passes.wind import Wind, air_velocity, incidence, triangles
 from clothsim.wind import GUST_MODES, WindSpec, gust_modes, wind_rows
 
 from conftest import error_line, run_cli
@@ -69,7 +70,7 @@ def test_force_on_one_triangle_is_the_closed_form(velocity, lift):
     last = np.ascontiguousarray((corners - moved).T)
     group = Wind(rows, modes, tris, *incidence(tris, 3), np.zeros((3, 1)), np.zeros((12, 1)), 1 / dt, dt, np.zeros(2))
     forces = np.zeros((3, 3))
-    add_wind(pos, last, forces, group, 0.0)
+    add_forces((group,), pos, last, forces, 0)  # substep 0 of a clock at zero: t = 0
     expected = closed_form(*corners, moved.mean(axis=0) / dt, wind) / 3
     for p in range(3):  # a third to each corner
         np.testing.assert_allclose(forces[:, p], expected, rtol=1e-12, atol=1e-12)

@@ -106,7 +106,7 @@ def wind_chunk(pos: np.ndarray, last: np.ndarray, wind: tuple, t: float, c: int)
 
     First the triangles' centroids, mean velocities and cross products are gathered into
     ``wind.scratch`` rows; every later loop runs over those contiguous rows (vectorised). On the
-    flag's 1,610 triangles (one thread, best of 5 x 300 calls of :func:`add_wind`, a busy 2-core
+    flag's 1,610 triangles (one thread, best of 5 x 300 calls of the whole pass, a busy 2-core
     machine) a per-triangle loop took 57 us for the drag and 78 more for the gusts; this takes
     28-41 us for the drag and 8-13 more for the gusts (the gather dominates).
     """
@@ -240,15 +240,6 @@ def work(wind: tuple, pos: np.ndarray, last: np.ndarray, substep: int, c0: int, 
 
 #: The force's ``gather`` (see :mod:`.forces`).
 gather = wind_gather
-
-
-@njit(**KERNEL)
-def add_wind(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, wind: tuple, t: float) -> None:
-    """forces += the wind's force on every point at time ``t`` (one call, for tests and tools)."""
-    for c in range(CHUNKS):
-        wind_chunk(pos, last, wind, t, c)
-    for c in range(CHUNKS):
-        wind_gather(wind, forces, c)
 
 
 def pack(sim: Any) -> Wind | None:
