@@ -114,7 +114,7 @@ def test_a_frame_given_up_half_way_is_restored_and_run_alone(monkeypatch: pytest
     monkeypatch.setattr(team, "team_size", lambda: 2)
     import clothsim.sim.simulation as simulation_module
 
-    monkeypatch.setattr(simulation_module, "substeps_kernel", lambda plan: lost_member)
+    monkeypatch.setattr(simulation_module, "run_substeps", lost_member)
     sim = clothsim.Simulation(scene)
     sim.step(3)
     assert sim.team.aborted_frames == 1
@@ -201,3 +201,33 @@ def test_team_counting_sort_matches_the_serial_sort(size: int) -> None:
         share_cost = cost[busy[mine]].sum()
         assert abs(share_cost - cost[busy0[:nb0]].sum() / size) <= cost.max()
     assert sorted(busy[taken].tolist()) == busy0[:nb0].tolist()
+
+
+def test_a_tuple_of_groups_reaches_every_thread_of_a_parallel_loop_whole(all_threads: int) -> None:
+    # The team's loop hands its threads a flat tuple and the nested type (a parallel loop opens one
+    # level of tuple); every thread must rebuild the same groups, arrays shared, not copied.
+    from collections import namedtuple
+
+    from numba import njit, prange
+
+    from clothsim.jit.internals import flatten, type_ref, unflatten
+
+    Inner = namedtuple("Inner", ["a", "k", "gone"])
+    Outer = namedtuple("Outer", ["inner", "b", "x"])
+
+    @njit(parallel=True)
+    def each_thread_reads(groups: tuple, out: np.ndarray) -> None:
+        flat = flatten(groups)
+        proto = type_ref(groups)
+        for m in prange(out.shape[0]):
+            g = unflatten(flat, proto)
+            o = g[1]
+            o.inner.a[m] = m  # the caller's array itself
+            out[m] = o.inner.k + o.b.sum() + o.x + (1.0 if o.inner.gone is None else 0.0) + g[0][0]
+
+    a = np.zeros(all_threads * 2)
+    groups = ((5.0,), Outer(Inner(a, 2.0, None), np.array([1.0, 2.0]), 0.5))
+    out = np.zeros(all_threads * 2)
+    each_thread_reads(groups, out)
+    assert np.array_equal(out, np.full(out.shape, 2.0 + 3.0 + 0.5 + 1.0 + 5.0))
+    assert np.array_equal(a, np.arange(a.size))

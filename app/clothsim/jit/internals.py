@@ -1,5 +1,5 @@
-"""Every use of Numba's private API, in one place: call-by-address, values handed by address
-through a parallel loop (:func:`stash`), the compiled-or-cached test,
+"""Every use of Numba's private API, in one place: call-by-address, nested tuples handed
+through a parallel loop (:func:`flatten`), the compiled-or-cached test,
 the package-wide cache stamp, and the thread team's atomics and clock (LLVM IR through
 ``numba.core.cgutils``). :func:`missing_private_api` names what a Numba release lacks (the
 test suite checks it, so an upgrade that removes any of it fails there with that name, not with a
@@ -35,7 +35,8 @@ from typing import Any
 
 from llvmlite import ir
 from numba import types
-from numba.core import caching, cgutils
+from numba.core import caching, cgutils, ir_utils
+from numba.core.imputils import impl_ret_borrowed
 from numba.extending import intrinsic
 
 _PACKAGE = Path(__file__).resolve().parent.parent
@@ -204,27 +205,44 @@ def call_native(typingctx, address, args):  # noqa: ANN001, ANN201
     return sig, codegen
 
 
+def _leaves(ty: types.Type) -> list[types.Type]:
+    """The types of the values nested in ``ty``, depth first (``ty`` itself when it is no tuple)."""
+    if isinstance(ty, types.BaseTuple):
+        return [leaf for t in ty.types for leaf in _leaves(t)]
+    return [ty]
+
+
 @intrinsic
-def stash(typingctx, value):  # noqa: ANN001, ANN201
-    """The address of a copy of ``value`` (any Numba value: a tuple of groups, say) on the caller's
-    stack, valid until the caller returns, for :func:`unstash` in a kernel the caller calls.
+def flatten(typingctx, value):  # noqa: ANN001, ANN201
+    """The values nested in ``value`` (a tuple of groups, say) as one flat tuple, depth first, for
+    :func:`unflatten`.
 
     A parallel loop passes each value it reads to its threads as an argument of Numba's gufunc,
-    which takes arrays and scalars, and tuples of them, but not a tuple of tuples; an address and
-    a :func:`type_ref` pass through any loop.
+    which opens one level of tuple (a group of arrays and scalars) but not a tuple of groups; a
+    flat tuple and a :func:`type_ref` of the nested one pass through any loop.
     """
-    sig = types.int64(value)
+    sig = types.BaseTuple.from_types(_leaves(value))(value)
 
     def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
-        ptr = cgutils.alloca_once_value(builder, args[0])
-        return builder.ptrtoint(ptr, ir.IntType(64))
+        values = []
+
+        def walk(ty: types.Type, value: Any) -> None:
+            if isinstance(ty, types.BaseTuple):
+                for i, t in enumerate(ty.types):
+                    walk(t, builder.extract_value(value, i))
+            else:
+                values.append(value)
+
+        walk(sig.args[0], args[0])
+        return impl_ret_borrowed(context, builder, sig.return_type,
+                                 context.make_tuple(builder, sig.return_type, values))
 
     return sig, codegen
 
 
 @intrinsic
 def type_ref(typingctx, value):  # noqa: ANN001, ANN201
-    """The type of ``value`` as a value (no data), for :func:`unstash`."""
+    """The type of ``value`` as a value (no data), for :func:`unflatten`."""
     sig = types.TypeRef(value)(value)
 
     def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
@@ -234,20 +252,36 @@ def type_ref(typingctx, value):  # noqa: ANN001, ANN201
 
 
 @intrinsic
-def unstash(typingctx, address, proto):  # noqa: ANN001, ANN201
-    """The value :func:`stash` put at ``address``; ``proto`` is its :func:`type_ref`. The caller
-    of :func:`stash` must still be running."""
+def unflatten(typingctx, flat, proto):  # noqa: ANN001, ANN201
+    """The nested value that :func:`flatten` made ``flat`` of; ``proto`` is its :func:`type_ref`."""
     ty = proto.instance_type
-    sig = ty(address, proto)
+    if [*flat.types] != _leaves(ty):
+        return None
+    sig = ty(flat, proto)
 
     def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
-        ptr = builder.inttoptr(args[0], context.get_value_type(ty).as_pointer())
-        value = builder.load(ptr)
-        # the value is returned as a new reference: its arrays are released when it goes out of scope
-        context.nrt.incref(builder, ty, value)
-        return value
+        leaves = iter(cgutils.unpack_tuple(builder, args[0], len(flat.types)))
+
+        def build(ty: types.Type) -> Any:
+            if isinstance(ty, types.BaseTuple):
+                return context.make_tuple(builder, ty, [build(t) for t in ty.types])
+            return next(leaves)
+
+        return impl_ret_borrowed(context, builder, ty, build(ty))
 
     return sig, codegen
+
+
+def _aliases_its_arguments(lhs: str, args: list, alias_map: dict, arg_aliases: set) -> None:
+    for arg in args:
+        ir_utils._add_alias(lhs, arg.name, alias_map, arg_aliases)
+
+
+# What flatten and unflatten return holds the arrays they were given: without saying so, Numba's
+# dead-code pass took a write through the result, inside a parallel loop, for a write to a fresh
+# array nobody reads, and dropped it.
+for _name in ("flatten", "unflatten"):
+    ir_utils.alias_func_extensions[(_name, __name__)] = _aliases_its_arguments
 
 
 def native_address(kernel: Any, argtypes: tuple) -> int:
@@ -295,6 +329,9 @@ def missing_private_api() -> list[str]:
                  "get_or_insert_function", "gep_inbounds"):
         if not hasattr(cgutils, name):
             missing.append(f"numba.core.cgutils.{name}")
+    for name in ("alias_func_extensions", "_add_alias"):
+        if not hasattr(ir_utils, name):
+            missing.append(f"numba.core.ir_utils.{name}")
     for name in ("_get_arg_packer", "_get_return_status", "get_function_type", "get_return_type"):
         if not hasattr(CPUCallConv, name):
             missing.append(f"numba.core.callconv.CPUCallConv.{name}")

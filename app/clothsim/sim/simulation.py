@@ -12,7 +12,7 @@ from ..validate import At, check, integer
 from ..wind import WINDS
 from . import team
 from .passes.colliders.primitives import SURFACE_OFFSET
-from .solvers.frame import PASS_ALL, kernel_addresses, substeps_kernel
+from .solvers.frame import PASS_ALL, kernel_addresses, run_substeps
 from .passes.forces import plan_forces
 from .passes.wind import triangles
 from ..jit import CHUNKS
@@ -404,8 +404,7 @@ class Simulation:
             if plan.mesh is not None:
                 plan = plan._replace(mesh=plan.mesh._replace(collide=collide))
             self._kernel_args = plan
-        run = substeps_kernel(self._kernel_args)
-        self.colliders_skipped += run(steps, *self._kernel_args, self._sync, size, passes, self._member_at)
+        self.colliders_skipped += run_substeps(steps, *self._kernel_args, self._sync, size, passes, self._member_at)
         if passes == PASS_ALL:  # pass by pass (the profiler), the caller counts each substep once its passes ran
             self._clock[1] += steps
         if self._sync[team.FAILED]:

@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit, prange, types
 
 from ...jit import CHUNKS, KERNEL, PARALLEL
-from ...jit.internals import call_native, native_address, stash, type_ref, unstash
+from ...jit.internals import call_native, flatten, native_address, type_ref, unflatten
 
 from ..passes.forces import force_gather, force_work
 from ..passes.colliders import collide_part, member_bounds, merge_bounds, reach_colliders
@@ -285,7 +285,7 @@ def _addresses(argtypes: tuple) -> tuple[int, int, int]:
             repel_slots.compile(repel)
         if collide is not None:
             collide_meshes_chunk.compile(collide)
-        substeps_kernel(groups).compile((i64, *groups, argtypes[3 + len(Plan._fields)], i64, i64, i64))
+        run_substeps.compile((i64, *groups, argtypes[3 + len(Plan._fields)], i64, i64, i64))
         warm_side_kernels()
 
     compile_elsewhere(_member, argtypes, meanwhile)
@@ -303,20 +303,12 @@ def kernel_addresses(plan: Plan, sync: np.ndarray) -> tuple[int, int, int]:
     return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (*plan, sync)), i64))
 
 
-@njit(**KERNEL)
-def _enter(me: int, working: int, address: int, proto: types.TypeRef) -> int:
-    """Member ``me`` of a team of ``working``: :func:`_member` with the arguments that
-    :func:`run_substeps` left at ``address`` (first the member's address); returns 1 if it failed."""
-    member, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync, passes = unstash(address, proto)
-    return call_native(member, (me, working, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync,
-                                passes))
-
-
 @njit(inline="always", **KERNEL)
 def _turn(m: int, size: int, member: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
-          col: tuple | None, mov: tuple | None, mesh: tuple | None, forces: tuple, pins: tuple | None,
-          contact: tuple | None, sync: np.ndarray, passes: int) -> None:
+          col: tuple | None, mov: tuple | None, mesh: tuple | None, flat_forces: tuple, forces_type: types.TypeRef,
+          pins: tuple | None, contact: tuple | None, sync: np.ndarray, passes: int) -> None:
     """Iteration ``m`` of the team's parallel loop: answer the roll call and run the member."""
+    forces = unflatten(flat_forces, forces_type)
     working = roll_call(sync, size)
     if working != 0:
         # one call site, with int64 arguments: one compiled _member whoever runs it
@@ -325,18 +317,6 @@ def _turn(m: int, size: int, member: int, steps: int, st: tuple, spec: tuple | N
             me = np.int64(m)
         if call_native(member, (me, working, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync,
                                 passes)) != 0:
-            sync[FAILED] = 1
-            atomic_cas(sync, ABORT, 0, 1)
-
-
-@njit(inline="always", **KERNEL)
-def _stashed_turn(m: int, size: int, address: int, proto: types.TypeRef, sync: np.ndarray) -> None:
-    working = roll_call(sync, size)
-    if working != 0:
-        me = 0
-        if working == size:
-            me = np.int64(m)
-        if _enter(me, working, address, proto) != 0:
             sync[FAILED] = 1
             atomic_cas(sync, ABORT, 0, 1)
 
@@ -364,35 +344,10 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
     """
     st.skips[0] = 0
     sync[:] = 0
+    # the loop's threads take a flat tuple, not a tuple of groups (see jit.internals.flatten)
+    flat_forces = flatten(forces)
+    forces_type = type_ref(forces)
     for m in prange(size):
-        _turn(m, size, member, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync, passes)
+        _turn(m, size, member, steps, st, spec, grid, col, mov, mesh, flat_forces, forces_type, pins, contact, sync,
+              passes)
     return st.skips[0]
-
-
-@njit(**PARALLEL)
-def _launch(address: int, proto: types.TypeRef, sync: np.ndarray, size: int) -> None:
-    sync[:] = 0
-    for m in prange(size):
-        _stashed_turn(m, size, address, proto, sync)
-
-
-@njit(**KERNEL)
-def run_substeps_stashed(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
-                         mov: tuple | None, mesh: tuple | None, forces: tuple, pins: tuple | None,
-                         contact: tuple | None, sync: np.ndarray, size: int, passes: int, member: int) -> int:
-    """:func:`run_substeps` for a plan with forces (``forces`` not empty). A parallel loop hands its
-    threads each value it reads as an argument of Numba's gufunc, which takes arrays, scalars and
-    tuples of them but not a tuple of groups, so the members get their arguments by address
-    (:func:`~clothsim.jit.internals.stash`). That costs the team time (see docs/performance.md,
-    Forces in the thread team), so a plan without forces keeps :func:`run_substeps`."""
-    st.skips[0] = 0
-    args = (member, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync, passes)
-    _launch(stash(args), type_ref(args), sync, size)
-    return st.skips[0]
-
-
-def substeps_kernel(plan: Plan):  # noqa: ANN201
-    """The frame kernel for ``plan`` (the groups, or their Numba types): :func:`run_substeps`, or
-    :func:`run_substeps_stashed` when the plan has forces."""
-    forces = plan.forces
-    return run_substeps_stashed if len(getattr(forces, "types", forces)) else run_substeps
