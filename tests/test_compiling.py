@@ -65,17 +65,18 @@ def test_kernels_cache_from_a_read_only_install(tmp_path: Path) -> None:
 
 
 def test_compile_compiles_everything_ahead_of_time(tmp_path: Path) -> None:
-    first = run_cli("compile", timeout=900)
+    first = run_cli("compile", "--jobs", "2", timeout=900)
     assert first.returncode == 0, first.stderr
     lines = first.stdout.splitlines()
+    assert lines[-1].endswith("s in 2 processes")
     assert lines[0].split()[:2] == ["work", "item"]
     items = [line for line in lines[1:-1]]
-    assert len(items) == 17 and any("self-collision grid, colliders" in i for i in items)
+    assert len(items) == 18 and any("self-collision grid, colliders" in i for i in items)
     assert any("bundled scene tablecloth" in i for i in items)
     assert any("wind" in i for i in items) and any("moving pins" in i for i in items)
     assert lines[-1].startswith("total")
     # afterwards no command needs a compile: running it again loads every kernel
-    again = run_cli("compile", timeout=900)
+    again = run_cli("compile", "--jobs", "1", timeout=900)
     assert again.returncode == 0, again.stderr
     assert all(line.rstrip().endswith("(cached)") for line in again.stdout.splitlines()[1:-1])
     assert NOTICE not in again.stderr
@@ -102,6 +103,15 @@ def test_bench_compile_rejects_an_unknown_command() -> None:
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == [
         "clothsim: error: --commands: unknown command 'nope' (expected some of: simulate, render, sphere, grid, xpbd, flag, capsule, tablecloth, mesh)"]
+
+@pytest.mark.parametrize("jobs", ["0", "two"])
+def test_compile_rejects_a_bad_number_of_jobs(jobs: str) -> None:
+    done = run_cli("compile", "--jobs", jobs)
+    assert done.returncode == 2 and done.stdout == ""
+    assert done.stderr.strip().splitlines() == [
+        f"clothsim: error: argument --jobs: '{jobs}' is not a whole number of processes >= 1 "
+        "(see clothsim compile --help)"]
+
 
 _CACHE_PROBE = """
 import numpy as np

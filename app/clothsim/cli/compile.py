@@ -29,7 +29,7 @@ def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet"
     data: dict[str, Any] = {
         "cloth": {"width": 1, "height": 1, "num_width_points": 6, "num_height_points": 6, "thickness": 0.01,
                   "orientation": 0, "pinned": [[0, 0]], "damping": 0.2, "density": 150, "ks": 5000},
-        "simulation": {"self_collision": {"spec": True, "grid": "grid", "off": False}[self_collision],
+        "simulation": {"self_collision": {"spec": True, "grid": "grid", "off": False, "contact": "contact"}[self_collision],
                        "integrator": integrator, "damping_mode": damping_mode, "simulation_steps": 2},
     }
     if colliders:
@@ -47,8 +47,8 @@ def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet"
 def work_items() -> list[tuple[str, Callable[[], None]]]:
     """Everything ``clothsim compile`` compiles: each frame-kernel plan (self-collision mode x
     colliders; wind and moving pins with the spec's self-collision, as the bundled ``flag`` uses),
-    the plans of the bundled capsule, box, moving-collider and mesh scenes, each other integrator,
-    the rest detector and the renderer's mesh kernel."""
+    the plans of the bundled capsule, box, moving-collider and mesh scenes, the contact mode's plan
+    with colliders, each other integrator, the rest detector and the renderer's mesh kernel."""
     from ..sim import Simulation
 
     def step(scene) -> Callable[[], None]:  # noqa: ANN001
@@ -67,6 +67,8 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
 
     items += [(f"frame kernel: bundled scene {name}", step(load_scene(name))) for name in ("capsule", "tablecloth",
                                                                                           "curtain")]
+    # the contact mode's plan with the course's colliders, and the crossing counter it starts with
+    items.append(("frame kernel: self-collision contact, colliders", step(_tiny_scene("contact", True))))
     # the bundled mesh scene's plan (other mesh plans compile on first use)
     items.append(("frame kernel: self-collision spec, colliders and meshes", step(_tiny_scene("spec", True, meshes=True))))
 
@@ -84,10 +86,10 @@ def side_kernels() -> None:
     warm_side_kernels()
 
 
-def compile_all() -> list[Compiled]:
-    """Compile (or load from the cache) every kernel of :func:`work_items`; returns every compile
-    made."""
-    return [c for _, _, compiled in each_item() for c in compiled]
+def compile_all(jobs: int = 1) -> list[Compiled]:
+    """Compile (or load from the cache) every kernel of :func:`work_items`, in ``jobs`` processes;
+    returns every compile made."""
+    return [c for _, _, compiled in each_item(jobs) for c in compiled]
 
 
 def record_command(log_path: str, argv: Sequence[str]) -> int:
@@ -117,34 +119,75 @@ def add_parser(sub: Any) -> None:
                     "integrators, the renderer's mesh kernel) and cache them, so that no later command waits "
                     "for a compile. Prints what it compiled and how long it took; with a warm cache it only "
                     "loads them.")
+    p.add_argument("--jobs", type=_jobs, default=None,
+                   help="processes compiling at once (default: one per core this process may use)")
     p.set_defaults(func=run_compile)
+
+
+def _jobs(text: str) -> int:
+    import argparse
+
+    try:
+        jobs = int(text)
+    except ValueError:
+        jobs = 0
+    if jobs < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of processes >= 1")
+    return jobs
 
 
 def run_compile(args: Any) -> int:
     """Body of ``clothsim compile``."""
+    import os
+
+    jobs = args.jobs or len(os.sched_getaffinity(0))
     total = 0.0
     count = 0
+    began = time.perf_counter()
     print(f"{'work item':<46}{'seconds':>9}  compiled")
-    for label, seconds, compiled in each_item():
+    for label, seconds, compiled in each_item(jobs):
         total += seconds
         mine = [c for c in compiled if c.depth == 0]
         count += len(compiled)
         names = ", ".join(sorted({c.kernel.rsplit('.', 1)[-1] for c in mine})) or "(cached)"
         print(f"{label:<46}{seconds:>9.1f}  {names}", flush=True)
-    print(f"{'total':<46}{total:>9.1f}  {count} compiles")
+    wall = time.perf_counter() - began
+    print(f"{'total':<46}{total:>9.1f}  {count} compiles, {wall:.1f} s in {jobs} process{'es' if jobs > 1 else ''}")
     return 0
 
 
-def each_item():  # noqa: ANN201
-    """Run :func:`work_items` one by one, yielding (label, seconds, compiles made) after each."""
+def each_item(jobs: int = 1):  # noqa: ANN201
+    """Run :func:`work_items`, yielding (label, seconds, compiles made) after each, in order. With
+    ``jobs`` > 1 the items run in that many fresh processes at once (Numba's cache is safe for
+    processes that compile at the same time: see :func:`clothsim.jit.internals.install_shared_cache`),
+    each item's compiles reported by the process that made them."""
+    if jobs <= 1:
+        yield from _items_here(range(len(work_items())))
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    count = len(work_items())
+    with ProcessPoolExecutor(max_workers=min(jobs, count), mp_context=multiprocessing.get_context("spawn")) as pool:
+        # one item a task, handed out as processes free up: the items' compile times differ fivefold
+        yield from pool.map(_item_elsewhere, range(count))
+
+
+def _item_elsewhere(index: int) -> tuple[str, float, list[Compiled]]:
+    return next(_items_here([index]))
+
+
+def _items_here(indices: Any):  # noqa: ANN202
     from numba.core import event
 
     from ..jit.watch import CompileRecorder
 
+    items = work_items()
     recorder = CompileRecorder()
     event.register("numba:compile", recorder)
     try:
-        for label, work in work_items():
+        for index in indices:
+            label, work = items[index]
             before = len(recorder.records)
             began = time.perf_counter()
             work()
