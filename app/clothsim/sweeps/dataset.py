@@ -173,19 +173,11 @@ class Dataset:
     def records(self) -> dict[str, dict[str, Any]]:
         """The last complete manifest line of each run (a torn last line is ignored)."""
         path = self.out / MANIFEST
-        found: dict[str, dict[str, Any]] = {}
         if not path.exists():
-            return found
+            return {}
         with os_errors(self.label, "cannot read the manifest"):
             text = path.read_bytes().decode("utf-8", errors="replace")
-        for line in text.splitlines():
-            try:
-                record = json.loads(line)
-            except ValueError:
-                continue
-            if isinstance(record, dict) and isinstance(record.get("id"), str):
-                found[record["id"]] = record
-        return found
+        return manifest_records(text)
 
     def finished(self, expected: dict[str, dict[str, Any]]) -> dict[str, dict[str, Any]]:
         """The records of runs that need not run again: ``expected`` maps id -> {params, samples,
@@ -369,3 +361,17 @@ def _difference(theirs: dict[str, Any], ours: dict[str, Any]) -> str:
         else:
             parts.append(f"{k} {json.dumps(a)} there, {json.dumps(b)} here")
     return "; ".join(parts) or "definition differs"
+
+
+def manifest_records(text: str) -> dict[str, dict[str, Any]]:
+    """The records of a manifest's text by run id, the last one of an id winning; a line that is
+    not a JSON object with a string ``id`` (one cut short by a crash, say) is skipped."""
+    found: dict[str, dict[str, Any]] = {}
+    for line in text.splitlines():
+        try:
+            record = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(record, dict) and isinstance(record.get("id"), str):
+            found[record["id"]] = record
+    return found

@@ -132,7 +132,7 @@ def remote_dataset(url: str, definition: dict[str, Any]) -> Any:
     return RemoteDataset(url, definition)
 
 
-from .dataset import DEFINITION, MANIFEST, Dataset  # noqa: E402 - the writer above runs in workers without it
+from .dataset import DEFINITION, MANIFEST, Dataset, manifest_records  # noqa: E402 - the writer above runs in workers without it
 
 
 class RemoteDataset(Dataset):
@@ -240,15 +240,7 @@ class RemoteDataset(Dataset):
         except (FileNotFoundError, OSError):
             text = b""
         self._manifest = text
-        found: dict[str, dict[str, Any]] = {}
-        for line in text.decode("utf-8", errors="replace").splitlines():
-            try:
-                record = json.loads(line)
-            except ValueError:
-                continue
-            if isinstance(record, dict) and isinstance(record.get("id"), str):
-                found[record["id"]] = record
-        return found
+        return manifest_records(text.decode("utf-8", errors="replace"))
 
     def append(self, record: dict[str, Any]) -> None:
         if self._manifest is None:
