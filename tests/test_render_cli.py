@@ -2,24 +2,21 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_cli
 
 pytest.importorskip("moderngl")
 
-APP = Path(__file__).resolve().parents[1] / "app"
-
 
 def clothsim(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(APP), env.get("PYTHONPATH", "")) if p)
-    return subprocess.run([sys.executable, "-m", "clothsim", *args], capture_output=True, text=True,
-                          env=env, cwd=cwd, timeout=300)
+    # the installed package, like every other command-line test (it once ran the source tree, whose
+    # kernel cache `clothsim compile` had not filled: a fresh clone compiled everything again)
+    return run_cli(*args, cwd=cwd)
 
 
 @pytest.fixture(scope="module")
@@ -86,8 +83,7 @@ def test_bad_render_setting_names_field(tmp_path):
 def test_simulation_commands_do_not_load_gl():
     code = ("import sys, clothsim.cli as c; c.build_parser(); import clothsim.cli.render; "
             "print('moderngl' in sys.modules, 'glcontext' in sys.modules)")
-    env = dict(os.environ, PYTHONPATH=str(APP))
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split() == ["False", "False"]
 
