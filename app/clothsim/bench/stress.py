@@ -146,15 +146,3 @@ class StressRun:
     def crossings(self) -> int:
         """The cloth's edge-triangle crossings now."""
         return self.sim.crossings()
-
-
-def crossings_per_frame(name: str, mode: str, frames: int, n: int = 50, *,
-                        twist_seconds: float = TWIST_SECONDS) -> list[int]:
-    """Crossings at the end of each of ``frames`` frames of stress run ``name`` in ``mode`` (a
-    run that blows up raises :class:`~clothsim.errors.SimulationBlowUp`)."""
-    run = StressRun(name, mode, n, twist_seconds=twist_seconds)
-    out = []
-    for _ in range(frames):
-        run.frame()
-        out.append(run.crossings())
-    return out

@@ -1,4 +1,4 @@
-"""``clothsim compile``: every Numba kernel compiled ahead of time (:func:`compile_all`), and
+"""``clothsim compile``: every Numba kernel compiled ahead of time (:func:`each_item`), and
 :func:`record_command` for ``clothsim bench compile``. A cold start's second process is
 :mod:`clothsim.jit.compile`; the notice and the record of compiles are :mod:`clothsim.jit.watch`.
 
@@ -84,12 +84,6 @@ def side_kernels() -> None:
     from ..sim import guard, rest  # noqa: F401
 
     warm_side_kernels()
-
-
-def compile_all(jobs: int = 1) -> list[Compiled]:
-    """Compile (or load from the cache) every kernel of :func:`work_items`, in ``jobs`` processes;
-    returns every compile made."""
-    return [c for _, _, compiled in each_item(jobs) for c in compiled]
 
 
 def record_command(log_path: str, argv: Sequence[str]) -> int:
