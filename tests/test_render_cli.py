@@ -4,19 +4,12 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import run_cli
 
 pytest.importorskip("moderngl")
-
-
-def clothsim(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess:
-    # the installed package, like every other command-line test (it once ran the source tree, whose
-    # kernel cache `clothsim compile` had not filled: a fresh clone compiled everything again)
-    return run_cli(*args, cwd=cwd)
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +24,7 @@ def egl_available():
 
 
 def test_info(egl_available):
-    r = clothsim("info")
+    r = run_cli("info")
     assert r.returncode == 0, r.stderr
     assert "GL renderer:" in r.stdout and "GL version:" in r.stdout
 
@@ -39,7 +32,7 @@ def test_info(egl_available):
 @pytest.mark.parametrize("name", ["out.png", "out.gif", "out.mp4", "frames/"])
 def test_render_formats(tmp_path, name, egl_available):
     out = tmp_path / name
-    r = clothsim("render", "sphere", "--frames", "4", "--every", "2", "--size", "96x64",
+    r = run_cli("render", "sphere", "--frames", "4", "--every", "2", "--size", "96x64",
                  "--shader", "phong", "-o", str(out))
     assert r.returncode == 0, r.stderr
     from PIL import Image
@@ -62,7 +55,7 @@ def test_render_formats(tmp_path, name, egl_available):
 
 def test_failed_render_leaves_no_file(tmp_path, egl_available):
     out = tmp_path / "odd.mp4"
-    r = clothsim("render", "sphere", "--frames", "1", "--size", "63x64", "-o", str(out))
+    r = run_cli("render", "sphere", "--frames", "1", "--size", "63x64", "-o", str(out))
     assert r.returncode == 2
     assert "even width and height" in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1
@@ -74,7 +67,7 @@ def test_bad_render_setting_names_field(tmp_path):
     scene.write_text('{"cloth": {"width": 1, "height": 1, "num_width_points": 4, "num_height_points": 4,'
                      ' "thickness": 0.01, "orientation": 0, "damping": 0.2, "density": 150, "ks": 5000},'
                      ' "render": {"size": [0, 10]}}')
-    r = clothsim("render", str(scene), "-o", str(tmp_path / "x.png"))
+    r = run_cli("render", str(scene), "-o", str(tmp_path / "x.png"))
     assert r.returncode == 2
     assert "render.size" in r.stderr and str(scene) in r.stderr
     assert not (tmp_path / "x.png").exists()
@@ -107,7 +100,7 @@ def test_missing_egl_gives_one_line(monkeypatch):
 
 
 def test_bench_render_ends_with_a_clip_end_to_end(egl_available):
-    r = clothsim("bench", "render", "pinned2", "--shaders", "normal,phong", "--frames", "4", "--repeats", "1",
+    r = run_cli("bench", "render", "pinned2", "--shaders", "normal,phong", "--frames", "4", "--repeats", "1",
                  "--warmup", "0", "--size", "64x64")
     assert r.returncode == 0, r.stderr
     lines = r.stdout.splitlines()

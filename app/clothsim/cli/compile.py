@@ -113,28 +113,17 @@ def add_parser(sub: Any) -> None:
                     "integrators, the renderer's mesh kernel) and cache them, so that no later command waits "
                     "for a compile. Prints what it compiled and how long it took; with a warm cache it only "
                     "loads them.")
-    p.add_argument("--jobs", type=_jobs, default=None,
+    p.add_argument("--jobs", type=int, default=None, metavar="N",
                    help="processes compiling at once (default: one per core this process may use)")
     p.set_defaults(func=run_compile)
 
 
-def _jobs(text: str) -> int:
-    import argparse
-
-    try:
-        jobs = int(text)
-    except ValueError:
-        jobs = 0
-    if jobs < 1:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of processes >= 1")
-    return jobs
-
-
 def run_compile(args: Any) -> int:
     """Body of ``clothsim compile``."""
-    import os
+    from ..jit.compile import available_cores
+    from ..validate import check, integer
 
-    jobs = args.jobs or len(os.sched_getaffinity(0))
+    jobs = available_cores() if args.jobs is None else check(integer(ge=1), args.jobs, "--jobs")
     total = 0.0
     count = 0
     began = time.perf_counter()
@@ -156,7 +145,7 @@ def each_item(jobs: int = 1):  # noqa: ANN201
     processes that compile at the same time: see :func:`clothsim.jit.internals.install_shared_cache`),
     each item's compiles reported by the process that made them."""
     if jobs <= 1:
-        yield from _items_here(range(len(work_items())))
+        yield from _items_here(None)
         return
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
@@ -171,12 +160,15 @@ def _item_elsewhere(index: int) -> tuple[str, float, list[Compiled]]:
     return next(_items_here([index]))
 
 
-def _items_here(indices: Any):  # noqa: ANN202
+def _items_here(indices: list[int] | None):  # noqa: ANN202
+    """Run the work items at ``indices`` (every one for None) in this process."""
     from numba.core import event
 
     from ..jit.watch import CompileRecorder
 
     items = work_items()
+    if indices is None:
+        indices = range(len(items))
     recorder = CompileRecorder()
     event.register("numba:compile", recorder)
     try:
