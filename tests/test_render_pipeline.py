@@ -83,3 +83,27 @@ def test_the_simulation_thread_ends_when_the_drawing_stops():
     frames.close()  # what a failed sink or Ctrl-C does to the loop
     assert not [t for t in threading.enumerate() if t.name == "clothsim-simulate"]
     assert sim.frame < 100
+
+
+def test_the_drawings_kernels_are_loaded_before_the_simulation_thread_starts(monkeypatch):
+    # Numba's compiling and cache loading is not thread-safe: the drawing's first kernel call must
+    # not load its kernel while the simulation thread loads the frame kernel (seen once in CI:
+    # "generator already executing" in Numba's typing registry).
+    from clothsim.render import pipeline
+
+    events = []
+    warm = pipeline.warm_side_kernels
+    start = threading.Thread.start
+
+    def warming() -> None:
+        events.append("kernels loaded")
+        warm()
+
+    def starting(self):  # noqa: ANN001, ANN202
+        events.append(f"{self.name} started")
+        return start(self)
+
+    monkeypatch.setattr(pipeline, "warm_side_kernels", warming)
+    monkeypatch.setattr(threading.Thread, "start", starting)
+    _clip(scene_from_dict(SMALL), 2, 1, ahead=2)
+    assert events[:2] == ["kernels loaded", "clothsim-simulate started"]

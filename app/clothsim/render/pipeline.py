@@ -21,7 +21,9 @@ from typing import Any
 import numpy as np
 
 from ..cloth import Springs
+from ..jit.compile import warm_side_kernels
 from ..scene import Scene
+from . import mesh  # noqa: F401 - registers the drawing's kernel for warm_side_kernels
 
 #: Drawn frames the simulation thread may run ahead of the drawing; two keep it busy through a
 #: long draw without holding more than a few copies of the positions.
@@ -151,6 +153,11 @@ def _threaded(plan: _Plan, ahead: int) -> Iterator[Snapshot | None]:
             return
         put(("done", _DONE))
 
+    # Numba's compiling and cache loading is not thread-safe: the drawing's first call of its
+    # kernel, loading it, at the moment the thread's first frame loads the simulation's, failed
+    # in Numba's typing registry ("generator already executing"; seen once in CI). So the kernels
+    # this thread's consumer calls are loaded before the thread starts.
+    warm_side_kernels()
     worker = threading.Thread(target=run, name="clothsim-simulate", daemon=True)
     worker.start()
     try:
