@@ -6,12 +6,20 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from clothsim.colliders import BY_KEY, KINDS, kind_number, scene_colliders
+from clothsim.colliders import BY_KEY, KINDS, scene_colliders
 from clothsim.errors import SceneError
 from clothsim.scene import scene_from_dict
 from conftest import SCENES
 
 KEYS = ["sphere", "plane", "capsule", "box", "mesh"]
+
+
+def _groups(sim) -> dict:  # noqa: ANN001
+    """The plan's collider groups by kind key."""
+    from clothsim.sim.passes.colliders import KIND_MODULES
+
+    by_group = {m.Group: kind.key for m, kind in zip(KIND_MODULES, KINDS)}
+    return {by_group[type(g)]: g for g in sim.plan.colliders}
 
 
 def _scene(moving: bool) -> dict:
@@ -39,20 +47,33 @@ def _scene(moving: bool) -> dict:
 
 def test_the_registry_lists_every_kind_once_in_scene_order() -> None:
     assert [k.key for k in KINDS] == KEYS
-    assert [kind_number(k) for k in KEYS] == list(range(len(KEYS)))
     assert set(BY_KEY) == set(KEYS)
 
 
 def test_every_per_kind_table_covers_exactly_the_registry() -> None:
     from clothsim.exporters.geometry import COLLIDER_KINDS
     from clothsim.render.renderer import Renderer
-    from clothsim.sim.passes.colliders import moving
+    from clothsim.sim.passes.colliders import KIND_MODULES
 
     assert list(COLLIDER_KINDS) == KEYS
     for key in KEYS:
         assert callable(getattr(Renderer, f"_draw_{key}")), key
-    assert [moving.KIND_SPHERE, moving.KIND_PLANE, moving.KIND_CAPSULE, moving.KIND_CUBOID,
-            moving.KIND_MESH] == [kind_number(k) for k in KEYS]
+    # the simulator's side: one pass module per kind, in registry order, each with the whole interface
+    assert [m.__name__.rsplit(".", 1)[1] for m in KIND_MODULES] == [k.pass_module for k in KINDS]
+    for module in KIND_MODULES:
+        for name in ("Group", "pack", "pose", "reach", "collide"):
+            assert hasattr(module, name), (module.__name__, name)
+        assert {"on", "tracks"} <= set(module.Group._fields), module.__name__
+
+
+def test_a_plan_holds_the_groups_of_the_kinds_its_scene_has_in_registry_order() -> None:
+    from clothsim.sim import Simulation
+
+    data = _scene(False)
+    del data["capsule"], data["sphere"]
+    sim = Simulation(scene_from_dict(data, "k.json"))
+    assert list(_groups(sim)) == ["plane", "box", "mesh"]
+    assert all(g.tracks is None for g in sim.plan.colliders)
 
 
 def test_the_loader_reads_every_kind_and_names_them_for_an_unknown_key() -> None:
@@ -86,25 +107,28 @@ def test_every_kind_is_posed_from_the_one_clock(integrator: str) -> None:
     sim.step(2)
     t = sim.time
     scene = sim.scene
-    for spec, rows in ((scene.spheres[0], sim._spheres), (scene.planes[0], sim._planes), (scene.boxes[0], sim._cuboids)):
+    groups = _groups(sim)
+    for spec, key in ((scene.spheres[0], "sphere"), (scene.planes[0], "plane"), (scene.boxes[0], "box")):
         anchor = np.asarray(spec.anchor)
-        assert np.array_equal(rows[0, :3], anchor + (spec.motion.track(spec.anchor).at(t) - anchor))
+        assert np.array_equal(groups[key].rows[0, :3], anchor + (spec.motion.track(spec.anchor).at(t) - anchor))
     capsule = scene.capsules[0]
     shift = capsule.motion.track(capsule.anchor).at(t) - np.asarray(capsule.anchor)
-    assert np.array_equal(sim._capsules[0, :3], np.asarray(capsule.a) + shift)
+    assert np.array_equal(groups["capsule"].rows[0, :3], np.asarray(capsule.a) + shift)
     mesh = scene.meshes[0]
-    assert np.array_equal(sim._meshes.pose[0, 3:], mesh.track().at(t))
+    assert np.array_equal(groups["mesh"].pose[0, 3:], mesh.track().at(t))
     before = scene.meshes[0].track().at(t - sim.dt)
-    assert np.allclose(sim._meshes.pose[0, :3], before, rtol=0, atol=1e-15)
+    assert np.allclose(groups["mesh"].pose[0, :3], before, rtol=0, atol=1e-15)
 
 
 def test_static_colliders_are_posed_once_and_stay() -> None:
     from clothsim.sim import Simulation
 
     sim = Simulation(scene_from_dict(_scene(False), "k.json"))
-    pose = sim._meshes.pose.copy()
-    rows = sim._spheres.copy()
+    groups = _groups(sim)
+    pose = groups["mesh"].pose.copy()
+    rows = groups["sphere"].rows.copy()
     sim.step(1)
-    assert sim._kernel_args.mov is None
-    assert np.array_equal(sim._meshes.pose, pose) and np.array_equal(pose[0, :3], [0.5, -2.0, 0.8])
-    assert np.array_equal(sim._spheres, rows)
+    assert all(g.tracks is None for g in sim.plan.colliders)
+    assert groups["sphere"].carry is None  # nothing moves: the spec's static sphere test
+    assert np.array_equal(groups["mesh"].pose, pose) and np.array_equal(pose[0, :3], [0.5, -2.0, 0.8])
+    assert np.array_equal(groups["sphere"].rows, rows)

@@ -131,7 +131,7 @@ def test_a_sphere_keyframed_through_a_hanging_cloth_leaves_no_point_inside(max_s
     for _ in range(60):
         sim.step()
         sphere = posed(sim.scene.spheres[0], sim.time)
-        assert np.allclose(sim._spheres[0, :3], sphere.origin)  # the kernel's pose is the drawn one
+        assert np.allclose(sim.plan.colliders[0].rows[0, :3], sphere.origin)  # the kernel's pose is the drawn one
         inside = sphere.radius - np.linalg.norm(sim.positions - sphere.origin, axis=1)
         deepest = max(deepest, inside.max())
     assert sim.time == pytest.approx(60 / 90)
@@ -268,21 +268,22 @@ def test_cloth_on_a_moving_box_is_carried_along_by_friction() -> None:
 def test_the_kernel_pose_follows_the_track_and_reset_puts_it_back() -> None:
     sim = _on_a_moving_box(0.3)
     sim.step(60)
-    assert np.allclose(sim._cuboids[0, :3], posed(sim.scene.boxes[0], sim.time).center)
-    assert sim._cuboids[0, 0] == pytest.approx(0.4 + 0.5 * (sim.time - 0.3))
+    boxes = [g for g in sim.plan.colliders if type(g).__name__ == "Boxes"][0].rows
+    assert np.allclose(boxes[0, :3], posed(sim.scene.boxes[0], sim.time).center)
+    assert boxes[0, 0] == pytest.approx(0.4 + 0.5 * (sim.time - 0.3))
     sim.reset()
-    assert sim.time == 0.0 and sim._cuboids[0, 0] == 0.4
+    assert sim.time == 0.0 and boxes[0, 0] == 0.4
     again = _on_a_moving_box(0.3)
     sim.step(60)
     again.step(60)
     assert np.array_equal(sim.positions, again.positions)
 
 
-def test_a_scene_without_capsules_boxes_or_motion_types_them_as_none() -> None:
-    # what keeps their code out of the compiled kernel (see clothsim.sim.state)
+def test_a_scene_plans_only_the_collider_kinds_it_has_and_no_motion_when_nothing_moves() -> None:
+    # what keeps the other kinds' code, and the moving code, out of the compiled kernel
     sim = Simulation(load_scene("sphere"))
-    _, _, _, col, mov, *_ = sim._kernel_args  # (st, spec, grid, col, mov, mesh, wind, pins)
-    assert col.capsules is None and col.cuboids is None and col.capsule_on is None and mov is None
+    assert [type(g).__name__ for g in sim.plan.colliders] == ["Spheres"]
+    assert all(g.tracks is None and g.carry is None for g in sim.plan.colliders)
     assert math.isclose(sim.time, 0.0)
 
 

@@ -84,7 +84,7 @@ def test_a_member_that_never_comes_ends_the_wait_in_bounded_time() -> None:
     # it must give up at its first barrier after BARRIER_NS, raise ABORT and return.
     sim = clothsim.Simulation(_scene("pinned2"))
     sim.step(1)  # compiled before the clock starts
-    groups = sim._kernel_args  # (st, spec, grid, col, mov, mesh, wind, pins): the kernel's state groups
+    groups = sim.plan  # the kernel's state groups
     sync = team.new_sync()
     sync[team.MODE] = team._TEAM
     t0 = time.perf_counter()

@@ -2,13 +2,14 @@
 box and triangle mesh.
 
 Each :class:`ColliderKind` names its scene-file key, the :class:`~clothsim.scene.Scene` field
-that holds its specs, the rule that validates one object into a spec, and how a spec is written
-back as scene JSON. Its place in :data:`KINDS` is its kind number in the kernels
-(:mod:`clothsim.sim.passes.colliders.moving`) and the order in which colliders are packed,
-collided, drawn and exported; the scene loader, the sweeps' scene writer, the exporters and the
-serve limits iterate :data:`KINDS` rather than naming the kinds. Every kind may carry a ``motion``
-(:mod:`clothsim.motion`): a translation track of its ``anchor``, evaluated at the simulation's one
-clock (:mod:`clothsim.sim.clock`).
+that holds its specs, the rule that validates one object into a spec, how a spec is written back
+as scene JSON, and its pass module in :mod:`clothsim.sim.passes.colliders` (the simulator's side:
+its group, packing, pose, reach test and collision). The order of :data:`KINDS` is the order in
+which colliders are packed, collided, drawn and exported; the scene loader, the simulator, the
+sweeps' scene writer, the renderer, the exporters and the serve limits iterate :data:`KINDS`
+rather than naming the kinds. Every kind may carry a ``motion`` (:mod:`clothsim.motion`): a
+translation track of its ``anchor``, evaluated at the simulation's one clock
+(:mod:`clothsim.sim.clock`).
 """
 
 from __future__ import annotations
@@ -171,11 +172,8 @@ class ColliderKind:
     rule: V.Rule
     #: a spec back as scene-file JSON (what loads back to the same spec)
     to_json: Callable[[Any], dict[str, Any]]
-
-    @property
-    def number(self) -> int:
-        """The kind's number in the kernels: its place in :data:`KINDS`."""
-        return KINDS.index(self)
+    #: its pass module in clothsim.sim.passes.colliders
+    pass_module: str
 
 
 def _spec_rule(record: V.Rule, spec: type) -> V.Rule:
@@ -184,19 +182,14 @@ def _spec_rule(record: V.Rule, spec: type) -> V.Rule:
 
 #: Every collider kind, in scene order (the order colliders are packed, collided, drawn, exported).
 KINDS: tuple[ColliderKind, ...] = (
-    ColliderKind("sphere", "spheres", _spec_rule(SPHERE, SphereSpec), collider_json),
-    ColliderKind("plane", "planes", _spec_rule(PLANE, PlaneSpec), collider_json),
-    ColliderKind("capsule", "capsules", _spec_rule(CAPSULE, CapsuleSpec), collider_json),
-    ColliderKind("box", "boxes", _spec_rule(BOX, BoxSpec), collider_json),
-    ColliderKind("mesh", "meshes", MESH, lambda spec: spec.as_json()),
+    ColliderKind("sphere", "spheres", _spec_rule(SPHERE, SphereSpec), collider_json, "sphere"),
+    ColliderKind("plane", "planes", _spec_rule(PLANE, PlaneSpec), collider_json, "plane"),
+    ColliderKind("capsule", "capsules", _spec_rule(CAPSULE, CapsuleSpec), collider_json, "capsule"),
+    ColliderKind("box", "boxes", _spec_rule(BOX, BoxSpec), collider_json, "box"),
+    ColliderKind("mesh", "meshes", MESH, lambda spec: spec.as_json(), "mesh"),
 )
 #: The kinds by scene-file key.
 BY_KEY: dict[str, ColliderKind] = {k.key: k for k in KINDS}
-
-
-def kind_number(key: str) -> int:
-    """The kernels' number of the kind with scene-file key ``key``."""
-    return KINDS.index(BY_KEY[key])
 
 
 def scene_colliders(scene: Any) -> list[tuple[ColliderKind, int, Any]]:

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..cloth import BENDING, BENDING_STIFFNESS_FACTOR
-from ..sim.passes.colliders.primitives import SURFACE_OFFSET
+from ..sim.passes.colliders.plane import Planes, SURFACE_OFFSET
+from ..sim.passes.colliders.sphere import Spheres
 
 
 def scatter_add(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
@@ -34,8 +35,9 @@ class NumpyCloth:
         self.gravity = np.asarray(sim.gravity)
         self.dt = sim.dt
         self.keep = 1.0 - sim.damping / 100.0
-        self.spheres = sim._spheres
-        self.planes = sim._planes
+        groups = {type(g): g.rows for g in sim.plan.colliders}
+        self.spheres = groups.get(Spheres, np.zeros((0, 5)))
+        self.planes = groups.get(Planes, np.zeros((0, 7)))
         self.limit = sim._stretch_limit
         self.steps = sim.simulation_steps
 

@@ -47,3 +47,11 @@ PARALLEL = {**KERNEL, "parallel": True}
 #: few enough that each item is a long contiguous stream. Items are contiguous point ranges, in
 #: the same order in every pass, so a core keeps working on the points it touched last.
 CHUNKS = 8
+
+
+def field_is_none(group: object, name: str) -> bool:
+    """At typing time (in an ``overload``): True when field ``name`` of the named-tuple type
+    ``group`` is None, i.e. the pass it belongs to is pruned."""
+    from numba import types
+
+    return isinstance(group.types[group.fields.index(name)], types.NoneType)  # type: ignore[attr-defined]

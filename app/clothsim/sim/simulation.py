@@ -11,15 +11,15 @@ from ..scene import Scene, check_field
 from ..validate import At, check, integer
 from ..wind import WINDS
 from . import team
-from .passes.colliders.primitives import SURFACE_OFFSET
-from .solvers.frame import PASS_ALL, kernel_addresses, run_substeps
+from .passes.colliders import plan_colliders
+from .passes.colliders.plane import SURFACE_OFFSET
+from .solvers.frame import PASS_ALL, kernel_addresses, run_substeps, with_mesh_address
 from .passes.forces import plan_forces
 from .passes.wind import triangles
 from ..jit import CHUNKS
 from .passes.pins import move_pins
-from .passes.colliders.moving import pack_motion, top_speed
-from .passes.colliders.shapes import collider_rows
-from .passes.colliders.meshgrid import mesh_group
+from .passes.colliders.mesh import MeshGroup, collide_address
+from .passes.colliders.moving import top_speed
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
 from .passes.contact import contact_group, response_reach
 from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash
@@ -57,25 +57,18 @@ class Simulation:
         self._all_springs = all_springs(self.nw, self.nh, self.initial_positions)
         self._cut = np.zeros(len(self._all_springs), dtype=np.bool_)
         self._forces = np.zeros((3, n))
-        self._rows = collider_rows(scene)
-        self._spheres, self._planes, self._capsules, self._cuboids = (r.copy() if r is not None else None
-                                                                      for r in self._rows)
         self._box = np.zeros(6)
-        self._sphere_on = np.zeros(len(self._spheres), dtype=np.bool_)
-        self._plane_on = np.zeros(len(self._planes), dtype=np.bool_)
-        self._capsule_on = None if self._capsules is None else np.zeros(len(self._capsules), dtype=np.bool_)
-        self._cuboid_on = None if self._cuboids is None else np.zeros(len(self._cuboids), dtype=np.bool_)
         #: Top speed of the moving colliders (m/s): the blow-up guard allows the energy they give.
         self.collider_top_speed = top_speed(scene)
-        # triangle meshes: packed and their grids built once (None without any)
-        self._meshes = mesh_group(scene)
         # Time as (time at the last re-plan, substeps since): a substep's time is computed from it,
         # not summed up, so the same run gives the same times however its substeps are grouped.
         # The one clock of everything that moves on its own (sim/clock.py).
         self._clock = np.zeros(2)
         self._clock_dt = self.dt
-        self._motion = pack_motion(scene, self._clock, self._clock_dt,
-                                   np.zeros((0, 6)) if self._meshes is None else self._meshes.pose)
+        # every collider kind's group, packed once (a mesh's grid is built here); moving ones are
+        # posed in place, from their scene rows kept for reset()
+        self._colliders = plan_colliders(scene, self._clock, self._clock_dt)
+        self._collider_rows = [g.rows.copy() if hasattr(g, "rows") else None for g in self._colliders]
         m = table_size(n)
         self._keys = np.zeros(n, dtype=np.int64)
         self._slots = np.zeros(n, dtype=np.int64)
@@ -211,6 +204,16 @@ class Simulation:
         re-made by every re-plan. For the integrators and tools; change them at your own risk."""
         return self._kernel_args
 
+    def bound_plan(self) -> Plan:
+        """:attr:`plan` with the mesh pass's address filled in (compiled or loaded on first use),
+        for the integrators that run the collider pass outside the thread team."""
+        plan = self._kernel_args
+        for g in plan.colliders:
+            if isinstance(g, MeshGroup) and not g.collide:
+                self._kernel_args = plan = with_mesh_address(plan, collide_address(g, plan.st.pos, plan.st.last,
+                                                                                   self.free))
+        return plan
+
     @property
     def spring_stiffness(self) -> np.ndarray:
         """Stiffness (N/m) of each spring of :attr:`springs` (0 for a cut one), re-made (a new
@@ -292,17 +295,16 @@ class Simulation:
                             zs, ks, cum, counted, tally, 2.0 * cloth.thickness, steps, 0)
         elif self._self_mode == MODE_GRID:
             grid = self.self_hash()
-        if self._motion is not None:
-            self._motion = self._motion._replace(dt=dt)
+        # the tracks of moving colliders count substeps of the (maybe new) length
+        self._colliders = tuple(g if g.tracks is None else g._replace(tracks=g.tracks._replace(dt=dt))
+                                for g in self._colliders)
         contact = self._contact_group()
-        if self.n_colliders > 0:
+        if self._colliders:
             margin = 0.0 if self._self_mode == 0 else 1.001 * (2.0 * cloth.thickness) / steps
             if contact is not None:
                 margin = 1.001 * response_reach(contact)
-            col = Colliders(self.free, self._spheres, self._planes, SURFACE_OFFSET, self._box, self._sphere_on,
-                            self._plane_on, self._boxes, margin, self._capsules, self._cuboids, self._capsule_on,
-                            self._cuboid_on)
-        return Plan(st, spec, grid, col, self._motion, self._meshes, plan_forces(self), self._pin_group(), contact)
+            col = Colliders(self.free, SURFACE_OFFSET, self._box, self._boxes, margin)
+        return Plan(st, spec, grid, col, self._colliders, plan_forces(self), self._pin_group(), contact)
 
     def _contact_group(self) -> tuple | None:
         """The contact mode's group, kept across re-plans of the same cloth (its reference state
@@ -345,7 +347,7 @@ class Simulation:
     @property
     def n_colliders(self) -> int:
         """Colliders of every kind in the scene (triangle meshes count one each)."""
-        return sum(0 if r is None else len(r) for r in self._rows) + len(self.scene.meshes)
+        return len(self.scene.colliders)
 
     @property
     def colliders_still_after(self) -> float:
@@ -366,9 +368,9 @@ class Simulation:
         """Back to the initial state (same seed, so the same jitter)."""
         self._pos[...] = self.initial_positions.T
         self._last[...] = self.initial_positions.T
-        for rows, start in zip((self._spheres, self._planes, self._capsules, self._cuboids), self._rows):
-            if rows is not None:
-                rows[...] = start
+        for g, start in zip(self._colliders, self._collider_rows):
+            if start is not None:
+                g.rows[...] = start
         self.frame = 0
         self.colliders_skipped = 0
         self.integrator_state = None
@@ -401,9 +403,7 @@ class Simulation:
             plan = self._kernel_args
             if plan.spec is not None:
                 plan = plan._replace(spec=plan.spec._replace(repel=repel))
-            if plan.mesh is not None:
-                plan = plan._replace(mesh=plan.mesh._replace(collide=collide))
-            self._kernel_args = plan
+            self._kernel_args = with_mesh_address(plan, collide)
         self.colliders_skipped += run_substeps(steps, *self._kernel_args, self._sync, size, passes, self._member_at)
         if passes == PASS_ALL:  # pass by pass (the profiler), the caller counts each substep once its passes ran
             self._clock[1] += steps

@@ -76,28 +76,17 @@ class GridHash(NamedTuple):
 
 
 class Colliders(NamedTuple):
-    """Every collider, kind by kind, with the bounding boxes of the skip test.
-
-    Spheres and planes are always arrays (possibly empty: the course's kernels); capsules and
-    boxes (``cuboids``, rows of :mod:`clothsim.sim.passes.colliders.shapes`) with their reach flags are ``None``
-    when the scene has none, so their code is pruned before typing. ``boxes`` are the members'
-    bounding boxes of the cloth. The tracks of moving colliders are a group of their own
-    (:class:`clothsim.sim.passes.colliders.moving.Motion`): a parallel loop cannot take a tuple nested in a tuple.
-    """
+    """What the collider pass shares over the kinds (their own groups are a plan's
+    ``colliders``, see :mod:`clothsim.sim.passes.colliders`): the free points, the offset a
+    corrected point is put at off a plane or a box face, the cloth's bounding box, the members'
+    boxes, and how far past the members' boxes (taken before self-collision) a point may be when
+    the colliders run."""
 
     free: np.ndarray
-    spheres: np.ndarray
-    planes: np.ndarray
     offset: float
     box: np.ndarray
-    sphere_on: np.ndarray
-    plane_on: np.ndarray
     boxes: np.ndarray
     self_margin: float
-    capsules: np.ndarray | None = None
-    cuboids: np.ndarray | None = None
-    capsule_on: np.ndarray | None = None
-    cuboid_on: np.ndarray | None = None
 
 
 class PinMotion(NamedTuple):
@@ -118,16 +107,15 @@ class Corrections(NamedTuple):
     """The position corrections every integrator but the fast path runs after its advance
     (:func:`clothsim.sim.passes.corrections.corrections`): the pinned mask, the self-collision mode
     (0 = off) with its hash (a :class:`GridHash`, whichever the mode), Provot's limit (<= 0 = off),
-    the colliders, moving-collider and mesh groups (each None when the scene has none) and the
-    contact mode's group (None in every other mode)."""
+    the :class:`Colliders` group (None when the scene has none) with the collider kinds' groups, and
+    the contact mode's group (None in every other mode)."""
 
     pinned: np.ndarray
     self_mode: int
     hash: GridHash
     stretch_limit: float
-    col: tuple | None
-    mov: tuple | None
-    mesh: tuple | None
+    col: Colliders | None
+    colliders: tuple
     #: the contact mode's group (:class:`clothsim.sim.passes.contact.Contact`), run after Provot; None otherwise
     contact: tuple | None = None
 
@@ -140,8 +128,8 @@ class Plan(NamedTuple):
     spec: SpecHash | None
     grid: GridHash | None
     col: Colliders | None
-    mov: tuple | None
-    mesh: tuple | None
+    #: the groups of the collider kinds the scene has (:mod:`clothsim.sim.passes.colliders`), in registry order
+    colliders: tuple
     #: the groups of the forces the scene uses (:mod:`clothsim.sim.passes.forces`), in registry order
     forces: tuple
     pins: PinMotion | None

@@ -30,7 +30,7 @@ import numba
 import numpy as np
 from numba import njit
 
-from ..jit import EXACT
+from ..jit import CHUNKS, EXACT
 from ..jit.compile import available_cores
 from ..jit.internals import atomic_add, atomic_cas, atomic_load, monotonic_ns, spin_pause, yield_core
 
@@ -178,3 +178,10 @@ def barrier(sync: np.ndarray, size: int, generation: int) -> int:
 def share(count: int, member: int, size: int) -> tuple[int, int]:
     """The member's contiguous part [lo, hi) of ``count`` work items."""
     return member * count // size, (member + 1) * count // size
+
+
+@njit(inline="always", **EXACT)
+def chunk_of(items: np.ndarray, c: int) -> np.ndarray:
+    """Work item ``c`` of :data:`~clothsim.jit.CHUNKS`: the c-th contiguous part of ``items``."""
+    lo, hi = share(items.shape[0], c, CHUNKS)
+    return items[lo:hi]

@@ -15,7 +15,6 @@ from ...jit import EXACT
 
 from .provot import provot
 from .colliders import collide_reachable
-from .colliders.mesh import mesh_corrections
 from .selfcollide import self_collide
 from .contact import contact_bound, contact_respond
 from ..state import Corrections
@@ -35,8 +34,7 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
         self_collide(pos, free, h.thickness, h.sim_steps, post.self_mode, h.cell[0], h.cell[1], h.cell[2], h.keys,
                      h.slots, h.start, h.order)
     contact_group(pos, last, post.contact, True)
-    skipped += collide_group(pos, last, post.col, post.mov, substep)
-    skipped += mesh_corrections(pos, last, free, post.mesh)
+    skipped += collide_group(pos, last, post.col, post.colliders, substep)
     if post.stretch_limit > 0.0:
         provot(pos, post.pinned, blocks, rest, nw, post.stretch_limit)
     contact_group(pos, last, post.contact, False)
@@ -44,11 +42,11 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
 
 
 @njit(**EXACT)
-def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, mov: tuple | None, substep: int) -> int:
+def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, colliders: tuple, substep: int) -> int:
     """The collider pass when the scene has colliders (``col`` is not None); returns those skipped."""
     if col is None:
         return 0
-    return collide_reachable(pos, last, col, mov, col.capsules, col.cuboids, substep)
+    return collide_reachable(pos, last, col, colliders, substep)
 
 
 @njit(**EXACT)
@@ -65,5 +63,4 @@ def contact_group(pos: np.ndarray, last: np.ndarray, contact: tuple | None, resp
 
 def has_corrections(post: Corrections) -> bool:
     """True when any correction pass is on (then velocities must be re-derived from positions)."""
-    return bool(post.self_mode != 0 or post.col is not None or post.stretch_limit > 0.0 or post.mesh is not None
-                or post.contact is not None)
+    return bool(post.self_mode != 0 or post.col is not None or post.stretch_limit > 0.0 or post.contact is not None)

@@ -109,10 +109,10 @@ class IntegratorState:
 
 def post_args(sim: Any) -> Corrections:
     """The correction passes' group (:class:`~clothsim.sim.state.Corrections`)."""
-    plan = sim.plan
+    plan = sim.bound_plan()
     # the contact mode is a pass of its own (plan.contact), not one of the hash's modes
     mode = 0 if plan.contact is not None else sim.self_mode
-    return Corrections(sim.pinned, mode, sim.self_hash(), plan.st.stretch_limit, plan.col, plan.mov, plan.mesh,
+    return Corrections(sim.pinned, mode, sim.self_hash(), plan.st.stretch_limit, plan.col, plan.colliders,
                        plan.contact)
 
 

@@ -13,12 +13,11 @@ search, the colliders), each ``None`` when the scene does not use it. Numba prun
 an argument that is ``None`` before typing, so a scene's kernel is compiled with only its own
 passes, and a new feature adds a field or a group, not a dozen positional arguments.
 
-Colliders are tested against the cloth's bounding box first: a sphere the box does not reach, or
-a plane the box (of current and last positions) lies wholly on one side of, cannot act this
-substep and is skipped exactly. Triangle meshes come as a group of their own
-(:class:`~clothsim.sim.passes.colliders.meshgrid.MeshGroup`, after the spheres and planes of each point's chunk);
-their pass is called by address, like the spec hash's query, so that it compiles beside the member
-and is not re-optimised inside it.
+Colliders come as one tuple of the groups of the kinds the scene has
+(:mod:`clothsim.sim.passes.colliders`): member 0 poses the moving ones, every member tests which
+the cloth's bounding box reaches and collides its own work items. The mesh kind's pass is called
+by address, like the spec hash's query, so that it compiles beside the member (in
+:func:`kernel_addresses`) and is not re-optimised inside it.
 """
 
 from __future__ import annotations
@@ -33,15 +32,14 @@ from ...jit import CHUNKS, KERNEL, PARALLEL
 from ...jit.internals import call_native, flatten, native_address, type_ref, unflatten
 
 from ..passes.forces import force_gather, force_work
-from ..passes.colliders import collide_part, member_bounds, merge_bounds, reach_colliders
+from ..passes.colliders import any_moving, collide_colliders, member_flags, pose_colliders, reach_colliders
+from ..passes.colliders.bounds import member_bounds, merge_bounds
 from ..passes.provot import provot_band, provot_bands, provot_cut
 from ..passes.springs import gather_chunk, spring_job
 from .verlet import verlet_chunk
 from ..clock import substep_time
 from ..passes.pins import offset_at, pin_chunk
-from ..passes.colliders.moving import moving, update_poses
-from ..passes.colliders.shapes import flags_for
-from ..passes.colliders.mesh import collide_meshes_chunk, mesh_flags, reachable_meshes
+from ..passes.colliders.mesh import MeshGroup, collide_meshes_chunk, collide_types
 from ..passes.contact import contact_bound, contact_respond
 from ..passes.selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from ..state import Plan
@@ -55,8 +53,8 @@ PASS_ALL = 31
 
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
-            col: tuple | None, mov: tuple | None, mesh: tuple | None, forces: tuple, pins: tuple | None,
-            contact: tuple | None, sync: np.ndarray, passes: int) -> None:
+            col: tuple | None, colliders: tuple, forces: tuple, pins: tuple | None, contact: tuple | None,
+            sync: np.ndarray, passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes.
 
     Returns early, with the state half-way through a substep, when a barrier reports that the
@@ -69,7 +67,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
     n = pos.shape[1]
     integrate = passes & PASS_INTEGRATE != 0
     self_on = passes & PASS_SELF != 0
-    colliders = passes & PASS_COLLIDERS != 0
+    colliding = passes & PASS_COLLIDERS != 0
     provot_on = st.stretch_limit > 0.0 and passes & PASS_PROVOT != 0
     # the member's own points (its chunks)
     c0, c1 = share(CHUNKS, member, size)
@@ -85,29 +83,18 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         # Each member tests the colliders itself (no barrier between the test and its use); member
         # 0 in the caller's arrays, the others in their own.
         box = col.box
-        sphere_on = col.sphere_on
-        plane_on = col.plane_on
-        capsule_on = col.capsule_on
-        cuboid_on = col.cuboid_on
         if member != 0:
             box = np.empty(6)
-            sphere_on = np.empty(col.spheres.shape[0], dtype=np.bool_)
-            plane_on = np.empty(col.planes.shape[0], dtype=np.bool_)
-            capsule_on = flags_for(col.capsules, col.capsule_on)
-            cuboid_on = flags_for(col.cuboids, col.cuboid_on)
+        ons = member_flags(colliders, member != 0)
         # Moving colliders: member 0 poses them at the start of the collider pass, behind one
         # more barrier (the pass reads the poses right after).
-        posing = moving(mov)
+        posing = any_moving(colliders)
         # The members' boxes are taken right after Verlet, before self-collision, which moves no
         # point by dist / sim_steps or more (an average of pushes each shorter than dist, over
         # sim_steps): widened by that, the box still bounds the cloth the colliders see, so
         # skipping stays exact.
         margin = 0.0 if not self_on else col.self_margin
         cols = np.empty((2, 64))
-        # (tested here, not inside the callees, so that a scene without meshes compiles none of them)
-        mesh_on = sphere_on
-        if mesh is not None:
-            mesh_on = mesh_flags(mesh)
     if pins is not None:
         offset = np.empty(3)
     gen = np.int64(0)
@@ -200,10 +187,10 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 if gen < 0:
                     return
         if col is not None:
-            if colliders:
+            if colliding:
                 if posing:
                     if member == 0:
-                        update_poses(mov, col.spheres, col.planes, col.capsules, col.cuboids, substep)
+                        pose_colliders(colliders, substep)
                     gen = barrier(sync, size, gen)
                     if gen < 0:
                         return
@@ -217,17 +204,11 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     if gen < 0:
                         return
                     merge_bounds(col.boxes, 0.0, box)
-                skipped = reach_colliders(box, col, sphere_on, plane_on, capsule_on, cuboid_on, mov, col.capsules,
-                                          col.cuboids)
-                if mesh is not None:
-                    skipped += reachable_meshes(mesh, box, mesh_on)
+                skipped = reach_colliders(colliders, box, ons, col.offset)
                 if member == 0:
                     st.skips[0] += skipped
                 for c in range(lo, hi):
-                    collide_part(pos, last, col, sphere_on, plane_on, capsule_on, cuboid_on, mov, col.capsules,
-                                 col.cuboids, c)
-                    if mesh is not None:
-                        call_native(mesh.collide, (pos, last, col.free, mesh, mesh_on, np.int64(c)))
+                    collide_colliders(colliders, pos, last, col.free, ons, col.offset, c)
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
@@ -274,11 +255,12 @@ def _addresses(argtypes: tuple) -> tuple[int, int, int]:
                  *(field(n) for n in ("start", "order", "busy", "xs", "ys", "zs", "ks")), i64, i64)
 
     collide = None
-    col, mesh = groups.col, groups.mesh
-    if mesh != types.none:
+    col = groups.col
+    meshes = [t for t in groups.colliders.types if getattr(t, "instance_class", None) is MeshGroup]
+    if meshes:
         # the mesh pass too: compiled here meanwhile, and kept out of the member's module
-        collide = (st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
-                   col.types[col.fields.index("free")], mesh, types.Array(types.bool_, 1, "C"), i64)
+        collide = collide_types(st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
+                                col.types[col.fields.index("free")], meshes[0])
 
     def meanwhile() -> None:
         if repel is not None:
@@ -305,9 +287,10 @@ def kernel_addresses(plan: Plan, sync: np.ndarray) -> tuple[int, int, int]:
 
 @njit(inline="always", **KERNEL)
 def _turn(m: int, size: int, member: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
-          col: tuple | None, mov: tuple | None, mesh: tuple | None, flat_forces: tuple, forces_type: types.TypeRef,
-          pins: tuple | None, contact: tuple | None, sync: np.ndarray, passes: int) -> None:
+          col: tuple | None, flat_colliders: tuple, colliders_type: types.TypeRef, flat_forces: tuple,
+          forces_type: types.TypeRef, pins: tuple | None, contact: tuple | None, sync: np.ndarray, passes: int) -> None:
     """Iteration ``m`` of the team's parallel loop: answer the roll call and run the member."""
+    colliders = unflatten(flat_colliders, colliders_type)
     forces = unflatten(flat_forces, forces_type)
     working = roll_call(sync, size)
     if working != 0:
@@ -315,7 +298,7 @@ def _turn(m: int, size: int, member: int, steps: int, st: tuple, spec: tuple | N
         me = 0
         if working == size:
             me = np.int64(m)
-        if call_native(member, (me, working, steps, st, spec, grid, col, mov, mesh, forces, pins, contact, sync,
+        if call_native(member, (me, working, steps, st, spec, grid, col, colliders, forces, pins, contact, sync,
                                 passes)) != 0:
             sync[FAILED] = 1
             atomic_cas(sync, ABORT, 0, 1)
@@ -323,16 +306,15 @@ def _turn(m: int, size: int, member: int, steps: int, st: tuple, spec: tuple | N
 
 @njit(**PARALLEL)
 def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
-                 mov: tuple | None, mesh: tuple | None, forces: tuple, pins: tuple | None,
-                 contact: tuple | None, sync: np.ndarray, size: int, passes: int, member: int) -> int:
+                 colliders: tuple, forces: tuple, pins: tuple | None, contact: tuple | None, sync: np.ndarray,
+                 size: int, passes: int, member: int) -> int:
     """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
 
     ``st``, ``spec``, ``grid``, ``col``, ``pins`` and ``contact`` are the named tuples of
-    :mod:`clothsim.sim.state`, ``mov`` the tracks of moving colliders
-    (:class:`clothsim.sim.passes.colliders.moving.Motion`), ``mesh`` the
-    :class:`~clothsim.sim.passes.colliders.meshgrid.MeshGroup` and ``forces`` the groups of
-    :mod:`clothsim.sim.passes.forces` the scene uses; all but ``st`` and ``forces`` are ``None`` for
-    a pass the scene does not use (``mesh`` needs ``col``). ``sync`` is
+    :mod:`clothsim.sim.state`, ``colliders`` the groups of the collider kinds
+    (:mod:`clothsim.sim.passes.colliders`) and ``forces`` those of
+    :mod:`clothsim.sim.passes.forces` the scene uses; all but ``st`` and the two tuples are ``None``
+    for a pass the scene does not use (``colliders`` is empty when ``col`` is None). ``sync`` is
     :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
     :mod:`clothsim.sim.team`); the result does not depend on it. After the call
     ``sync[team.ABORT]`` set means the frame was given up half-way (restore and run it alone).
@@ -345,9 +327,20 @@ def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, 
     st.skips[0] = 0
     sync[:] = 0
     # the loop's threads take a flat tuple, not a tuple of groups (see jit.internals.flatten)
+    flat_colliders = flatten(colliders)
+    colliders_type = type_ref(colliders)
     flat_forces = flatten(forces)
     forces_type = type_ref(forces)
     for m in prange(size):
-        _turn(m, size, member, steps, st, spec, grid, col, mov, mesh, flat_forces, forces_type, pins, contact, sync,
-              passes)
+        _turn(m, size, member, steps, st, spec, grid, col, flat_colliders, colliders_type, flat_forces, forces_type,
+              pins, contact, sync, passes)
     return st.skips[0]
+
+
+def with_mesh_address(plan: Plan, address: int) -> Plan:
+    """``plan`` with the mesh pass's address (the third of :func:`kernel_addresses`) in its mesh
+    group; ``plan`` itself without meshes."""
+    if not address:
+        return plan
+    return plan._replace(colliders=tuple(g._replace(collide=address) if isinstance(g, MeshGroup) else g
+                                         for g in plan.colliders))

@@ -1,186 +1,173 @@
-"""The collider pass: the cloth's bounding box, the test of which colliders it can reach (a sphere
-the box does not reach, or a plane the box of current and last positions lies wholly on one side
-of, cannot act this substep and is skipped exactly), and the collisions themselves, kind by kind in
-scene order. The thread team (:mod:`clothsim.sim.solvers.frame`) runs the work items (:func:`collide_part`) of the same
-functions as :func:`collide_reachable`, the other integrators' pass.
+"""The colliders: one registry of kinds (sphere, plane, capsule, box, mesh), and the collider pass
+every integrator runs over whichever of them a scene has.
+
+A collider kind is one module of this package (:mod:`.sphere` is the simplest) that defines:
+
+* ``Group``: a ``NamedTuple`` of its flat arrays: its rows, its reach flags ``on`` (one per
+  collider) and the :class:`~.moving.Tracks` of its moving colliders (None when none moves);
+* ``pack(scene, clock, dt, swept)``: its group for a scene, or None when the scene has none of
+  the kind; ``clock`` and ``dt`` are the simulation's one clock and substep length, ``swept``
+  says that something in the scene moves (the sphere and the plane then take their swept tests);
+* ``pose(g, substep)``: compiled; puts its moving colliders at their pose for substep
+  ``substep`` of the call (:func:`~.moving.pose_rows` does it for rows of points);
+* ``reach(g, box, on, offset) -> int``: compiled; marks in ``on`` which colliders the cloth's
+  bounding box (:mod:`.bounds`) may touch this substep, and returns how many it ruled out (a
+  collider ruled out could not have moved a point, so skipping it is exact);
+* ``collide(g, pos, last, free, c, on, offset)``: compiled; work item ``c`` (of
+  :data:`~clothsim.jit.CHUNKS`) of the free points against its reachable colliders. A point's
+  correction depends on that point alone, so the work items may run on any thread.
+
+Its line in :data:`clothsim.colliders.KINDS` (the scene's side: key, rule, JSON, and the name of
+this module) is all the simulator needs. A plan holds the groups of the kinds its scene has, as one
+tuple in registry order, and :func:`pose_colliders`, :func:`reach_colliders` and
+:func:`collide_colliders` are resolved at compile time, for that tuple's types, into direct calls of
+those kinds' functions: a scene compiles only its own kinds. Every point meets the kinds in
+registry order, the colliders of a kind in scene order. The thread team runs these same
+functions (member 0 poses, every member tests reach itself and collides its own work items); every
+other integrator calls :func:`collide_reachable`.
 """
 
 from __future__ import annotations
 
+from importlib import import_module
+from types import ModuleType
+from typing import Any
+
 import numpy as np
 from numba import njit, prange
+from numba.extending import overload
 
-from ....jit import CHUNKS, KERNEL, PARALLEL
-from .primitives import collide_planes, collide_spheres
-from .moving import collide_moving_planes, collide_moving_spheres, reach_moving, update_poses
-from .shapes import collide_shapes, reach_shapes
-from ...team import share
+from ....colliders import KINDS
+from ....jit import CHUNKS, KERNEL, PARALLEL, field_is_none
+from ....jit.internals import flatten, type_ref, unflatten
+from .bounds import cloth_bounds
+
+#: Every kind's pass module, in registry order (the order a point meets them).
+KIND_MODULES: tuple[ModuleType, ...] = tuple(import_module(f"{__package__}.{kind.pass_module}") for kind in KINDS)
+
+_BY_GROUP = {module.Group: module for module in KIND_MODULES}
 
 
-@njit(**KERNEL)
-def cloth_bounds(pos: np.ndarray, last: np.ndarray, box: np.ndarray) -> None:
-    """box = [min xyz, max xyz] over the current and last positions of all points.
+def _module(group_type) -> ModuleType:  # noqa: ANN001
+    cls = getattr(group_type, "instance_class", None)
+    if cls not in _BY_GROUP:
+        raise TypeError(f"{group_type} is not the group of a registered collider kind "
+                        "(clothsim.sim.passes.colliders.KIND_MODULES)")
+    return _BY_GROUP[cls]
 
-    Pinned points are included: they only widen the box, which keeps the skip test exact, and
-    the sweep stays contiguous (vectorised).
-    """
-    range_bounds(pos, last, 0, pos.shape[1], box, np.empty((2, 64)))
+
+def plan_colliders(scene: Any, clock: np.ndarray, dt: float) -> tuple:
+    """The groups of the collider kinds ``scene`` has, in registry order (a plan's ``colliders``)."""
+    swept = any(spec.motion is not None for spec in scene.colliders)
+    return tuple(g for g in (module.pack(scene, clock, dt, swept) for module in KIND_MODULES) if g is not None)
+
+
+def pose_colliders(cols: tuple, substep: int) -> None:
+    """Every moving collider of ``cols`` to its pose for substep ``substep`` (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+def reach_colliders(cols: tuple, box: np.ndarray, ons: tuple, offset: float) -> int:
+    """Every kind's reach test, its flags into the matching array of ``ons``; returns the
+    colliders ruled out (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+def collide_colliders(cols: tuple, pos: np.ndarray, last: np.ndarray, free: np.ndarray, ons: tuple, offset: float,
+                      c: int) -> None:
+    """Work item ``c`` of the free points against every kind's reachable colliders, kind by kind
+    (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+def member_flags(cols: tuple, own: bool) -> tuple:
+    """The reach flags of every kind, as a tuple of arrays: the groups' own (``own`` False), or new
+    ones (a team member other than the first, which tests reach for itself) (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+def any_moving(cols: tuple) -> bool:
+    """True when some collider of ``cols`` moves: a constant of the compiled kernel (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(pose_colliders, jit_options=KERNEL)
+def _pose_colliders(cols, substep):  # noqa: ANN001, ANN202
+    if len(cols.types) == 0:
+        return lambda cols, substep: None
+    pose = _module(cols.types[0]).pose
+
+    def impl(cols, substep):  # noqa: ANN001, ANN202
+        pose(cols[0], substep)
+        pose_colliders(cols[1:], substep)
+
+    return impl
+
+
+@overload(reach_colliders, jit_options=KERNEL)
+def _reach_colliders(cols, box, ons, offset):  # noqa: ANN001, ANN202
+    if len(cols.types) == 0:
+        return lambda cols, box, ons, offset: 0
+    reach = _module(cols.types[0]).reach
+
+    def impl(cols, box, ons, offset):  # noqa: ANN001, ANN202
+        skipped = reach(cols[0], box, ons[0], offset)
+        return skipped + reach_colliders(cols[1:], box, ons[1:], offset)
+
+    return impl
+
+
+@overload(collide_colliders, jit_options=KERNEL)
+def _collide_colliders(cols, pos, last, free, ons, offset, c):  # noqa: ANN001, ANN202
+    if len(cols.types) == 0:
+        return lambda cols, pos, last, free, ons, offset, c: None
+    collide = _module(cols.types[0]).collide
+
+    def impl(cols, pos, last, free, ons, offset, c):  # noqa: ANN001, ANN202
+        collide(cols[0], pos, last, free, c, ons[0], offset)
+        collide_colliders(cols[1:], pos, last, free, ons[1:], offset, c)
+
+    return impl
+
+
+@overload(member_flags, jit_options=KERNEL)
+def _member_flags(cols, own):  # noqa: ANN001, ANN202
+    if len(cols.types) == 0:
+        return lambda cols, own: ()
+
+    def impl(cols, own):  # noqa: ANN001, ANN202
+        on = cols[0].on
+        if own:
+            on = np.empty_like(on)
+        return (on,) + member_flags(cols[1:], own)
+
+    return impl
+
+
+@overload(any_moving, jit_options=KERNEL)
+def _any_moving(cols):  # noqa: ANN001, ANN202
+    moving = any(not field_is_none(t, "tracks") for t in cols.types)
+    return lambda cols: moving
 
 
 @njit(inline="always", **KERNEL)
-def range_bounds(pos: np.ndarray, last: np.ndarray, lo: int, hi: int, box: np.ndarray, cols: np.ndarray) -> None:
-    """box = [min xyz, max xyz] over the current and last positions of the points lo..hi-1;
-    ``cols`` is (2, 64) work space."""
-    # Columns of the range as independent running minima/maxima: one running value would chain
-    # every comparison, and LLVM does not vectorise a floating-point min reduction unless NaNs
-    # are ruled out. Here the inner loop is element-wise over a row, so it vectorises.
-    n = hi - lo
-    if n <= 0:
-        box[:3] = np.inf
-        box[3:] = -np.inf
-        return
-    w = min(n, 64)
-    lo_c = cols[0, :w]
-    hi_c = cols[1, :w]
-    for c in range(3):
-        first = pos[c, lo : lo + w]
-        for j in range(w):
-            lo_c[j] = first[j]
-            hi_c[j] = first[j]
-        for r0 in range(lo, hi, w):
-            x = pos[c, r0 : min(r0 + w, hi)]
-            xl = last[c, r0 : min(r0 + w, hi)]
-            for j in range(x.shape[0]):
-                a = x[j]
-                b = xl[j]
-                m = a if a < b else b
-                lo_c[j] = m if m < lo_c[j] else lo_c[j]
-                m = a if a > b else b
-                hi_c[j] = m if m > hi_c[j] else hi_c[j]
-        box[c] = lo_c.min()
-        box[3 + c] = hi_c.max()
-
-
-@njit(inline="always", **KERNEL)
-def member_bounds(pos: np.ndarray, last: np.ndarray, boxes: np.ndarray, cols: np.ndarray, lo: int, hi: int) -> None:
-    """Bound the points of chunks lo..hi-1 (a member's share) in one sweep into boxes[lo], and
-    empty the rows lo+1..hi-1: the union of the rows is then the cloth's box whatever the team
-    size (min and max are exact), and one long sweep vectorises where eight short ones ran at
-    half the speed."""
-    if lo >= hi:
-        return
-    n = pos.shape[1]
-    range_bounds(pos, last, share(n, lo, CHUNKS)[0], share(n, hi, CHUNKS)[0], boxes[lo], cols)
-    for c in range(lo + 1, hi):
-        boxes[c, :3] = np.inf
-        boxes[c, 3:] = -np.inf
-
-
-@njit(inline="always", **KERNEL)
-def merge_bounds(boxes: np.ndarray, margin: float, box: np.ndarray) -> None:
-    """box = the union of the rows of ``boxes``, widened by ``margin`` on every side."""
-    for c in range(3):
-        lo = boxes[0, c]
-        hi = boxes[0, 3 + c]
-        for r in range(1, boxes.shape[0]):
-            lo = min(lo, boxes[r, c])
-            hi = max(hi, boxes[r, 3 + c])
-        box[c] = lo - margin
-        box[3 + c] = hi + margin
-
-
-@njit(**KERNEL)
-def reachable_colliders(box: np.ndarray, spheres: np.ndarray, planes: np.ndarray, sphere_on: np.ndarray,
-                        plane_on: np.ndarray) -> int:
-    """Mark which colliders the bounding box may touch; returns how many were ruled out."""
-    skipped = 0
-    for o in range(spheres.shape[0]):
-        d2 = 0.0
-        for c in range(3):
-            x = spheres[o, c]
-            if x < box[c]:
-                d2 += (box[c] - x) ** 2
-            elif x > box[3 + c]:
-                d2 += (x - box[3 + c]) ** 2
-        sphere_on[o] = d2 <= spheres[o, 3] ** 2
-        skipped += 0 if sphere_on[o] else 1
-    for o in range(planes.shape[0]):
-        lo = 0.0
-        hi = 0.0
-        for c in range(3):
-            n = planes[o, 3 + c]
-            a = (box[c] - planes[o, c]) * n
-            b = (box[3 + c] - planes[o, c]) * n
-            lo += a if a < b else b
-            hi += a if a > b else b
-        # every point strictly on the normal's side, or strictly behind: nothing can cross
-        plane_on[o] = not (lo > 0.0 or hi < 0.0)
-        skipped += 0 if plane_on[o] else 1
-    return skipped
-
-
-@njit(inline="always", **KERNEL)
-def collide_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, spheres: np.ndarray, planes: np.ndarray,
-                  offset: float, sphere_on: np.ndarray, plane_on: np.ndarray, c: int) -> None:
-    """The static spheres and planes for the c-th of CHUNKS parts of the free points."""
-    n = free.shape[0]
-    f0, f1 = share(n, c, CHUNKS)
-    part = free[f0:f1]
-    for o in range(spheres.shape[0]):
-        if sphere_on[o]:
-            collide_spheres(pos, last, part, spheres[o : o + 1])
-    for o in range(planes.shape[0]):
-        if plane_on[o]:
-            collide_planes(pos, last, part, planes[o : o + 1], offset)
-
-
-@njit(**KERNEL)
-def reach_colliders(box: np.ndarray, col: tuple, sphere_on: np.ndarray, plane_on: np.ndarray,
-                    capsule_on: np.ndarray | None, cuboid_on: np.ndarray | None, motion: tuple | None,
-                    capsules: np.ndarray | None, cuboids: np.ndarray | None) -> int:
-    """Mark which colliders of every kind the cloth's box may reach; returns how many were ruled out.
-
-    ``motion``, ``capsules`` and ``cuboids`` are the group's optional fields passed on their own:
-    Numba prunes a branch on an argument that is ``None`` (not on a tuple's field), so a scene
-    compiles only the kinds it has."""
-    if motion is None:
-        skipped = reachable_colliders(box, col.spheres, col.planes, sphere_on, plane_on)
-    else:
-        skipped = reach_moving(box, col.spheres, col.planes, sphere_on, plane_on, motion)
-    return skipped + reach_shapes(box, capsules, cuboids, capsule_on, cuboid_on, col.offset)
-
-
-@njit(**KERNEL)
-def collide_part(pos: np.ndarray, last: np.ndarray, col: tuple, sphere_on: np.ndarray, plane_on: np.ndarray,
-                 capsule_on: np.ndarray | None, cuboid_on: np.ndarray | None, motion: tuple | None,
-                 capsules: np.ndarray | None, cuboids: np.ndarray | None, c: int) -> None:
-    """Work item ``c`` of the collider pass: the c-th of CHUNKS parts of the free points meets the
-    reachable spheres, planes, capsules and boxes, kind by kind in scene order."""
-    n = col.free.shape[0]
-    f0, f1 = share(n, c, CHUNKS)
-    part = col.free[f0:f1]
-    if motion is None:
-        collide_chunk(pos, last, col.free, col.spheres, col.planes, col.offset, sphere_on, plane_on, c)
-    else:
-        collide_moving_spheres(pos, last, part, col.spheres, sphere_on, motion.sphere_carry)
-        collide_moving_planes(pos, last, part, col.planes, plane_on, motion.plane_carry, col.offset)
-    collide_shapes(pos, last, part, capsules, cuboids, capsule_on, cuboid_on, col.offset)
+def _collide_chunk(pos: np.ndarray, last: np.ndarray, col: tuple, flat: tuple, cols_type: Any, c: int) -> None:
+    cols = unflatten(flat, cols_type)
+    collide_colliders(cols, pos, last, col.free, member_flags(cols, False), col.offset, c)
 
 
 @njit(**PARALLEL)
-def collide_reachable(pos: np.ndarray, last: np.ndarray, col: tuple, motion: tuple | None,
-                      capsules: np.ndarray | None, cuboids: np.ndarray | None, substep: int) -> int:
-    """Collide with the colliders the cloth can reach at substep ``substep`` of the call (moving
-    ones put at their pose first); returns the number skipped.
-
-    A point's correction depends on that point alone, so the free points are split over the
-    cores; each point meets the spheres, then the planes, capsules and boxes, in scene order.
-    """
-    update_poses(motion, col.spheres, col.planes, capsules, cuboids, substep)
+def collide_reachable(pos: np.ndarray, last: np.ndarray, col: tuple, cols: tuple, substep: int) -> int:
+    """The collider pass of every integrator but the thread team's, at substep ``substep`` of the
+    call: moving colliders posed, the cloth bounded, reach tested, then the work items over the
+    cores; returns the colliders ruled out. ``col`` is the
+    :class:`~clothsim.sim.state.Colliders` group, ``cols`` the kinds' groups."""
+    pose_colliders(cols, substep)
     cloth_bounds(pos, last, col.box)
-    skipped = reach_colliders(col.box, col, col.sphere_on, col.plane_on, col.capsule_on, col.cuboid_on, motion,
-                              capsules, cuboids)
+    skipped = reach_colliders(cols, col.box, member_flags(cols, False), col.offset)
+    # the loop's threads take a flat tuple, not a tuple of groups (see jit.internals.flatten)
+    flat = flatten(cols)
+    cols_type = type_ref(cols)
     for c in prange(CHUNKS):
-        collide_part(pos, last, col, col.sphere_on, col.plane_on, col.capsule_on, col.cuboid_on, motion, capsules,
-                     cuboids, c)
+        _collide_chunk(pos, last, col, flat, cols_type, c)
     return skipped

@@ -42,11 +42,17 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-from numba import njit
+from typing import Any
 
-from ....jit import CHUNKS, EXACT
-from .meshgrid import DIMS_CELL0, DIMS_CLOSED, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
+import numba
+import numpy as np
+from numba import njit, types
+
+from ....jit import CHUNKS, EXACT, KERNEL
+from ....jit.internals import call_native, native_address
+from ...clock import substep_time
+from .moving import Tracks, track_ends
+from .meshgrid import MeshGroup, mesh_group, DIMS_CELL0, DIMS_CLOSED, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
     INFO_HI, INFO_INV_H, INFO_LO, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK
 from ...team import share
 
@@ -379,14 +385,6 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
 
 
 @njit(**EXACT)
-def mesh_flags(mesh: tuple | None) -> np.ndarray:
-    """Work space: one reachability flag per mesh (none without meshes)."""
-    if mesh is None:
-        return np.zeros(0, dtype=np.bool_)
-    return np.zeros(mesh.dims.shape[0], dtype=np.bool_)
-
-
-@njit(**EXACT)
 def reachable_meshes(mesh: tuple | None, box: np.ndarray, on: np.ndarray) -> int:
     """Mark the meshes the cloth's bounding box (current and last positions) may touch during
     this substep (at their poses); returns how many were ruled out. A mesh's box, over both
@@ -436,18 +434,59 @@ def mesh_targets(pos: np.ndarray, last: np.ndarray, mesh: tuple, brute: bool) ->
     return out
 
 
+# -- the kind's passes (see clothsim.sim.passes.colliders) -----------------------------------------
+
+Group = MeshGroup
+
+
+def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> MeshGroup | None:
+    """The group of ``scene``'s meshes, their grids built (None without any)."""
+    return mesh_group(scene, clock, dt)
+
+
+@njit(**KERNEL)
+def pose_meshes(tr: Tracks | None, pose: np.ndarray, substep: int) -> None:
+    """Each moving mesh's translation at the start and end of substep ``substep`` of the call into
+    its row of ``pose`` (nothing when none moves: ``tr`` is None). Times count from the clock's
+    base (see :mod:`clothsim.sim.clock`)."""
+    if tr is None:
+        return
+    s0 = substep_time(tr.clock, substep, tr.dt)
+    s1 = substep_time(tr.clock, substep + 1, tr.dt)
+    for m in range(tr.row.shape[0]):
+        track_ends(tr, m, s0, s1)
+        r = tr.row[m]
+        for c in range(3):
+            pose[r, c] = tr.scratch[0, c]
+            pose[r, 3 + c] = tr.scratch[1, c]
+
+
+@njit(**KERNEL)
+def pose(g: MeshGroup, substep: int) -> None:
+    """Put the moving meshes at their pose for substep ``substep``."""
+    pose_meshes(g.tracks, g.pose, substep)
+
+
 @njit(**EXACT)
-def mesh_corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple | None) -> int:
-    """The mesh pass of the integrators other than the spec's Verlet, with the meshes at their
-    poses (the collider pass put them there); returns the meshes skipped."""
-    if mesh is None:
-        return 0
-    box = np.empty(6)
-    for c in range(3):
-        box[c] = min(pos[c].min(), last[c].min())
-        box[3 + c] = max(pos[c].max(), last[c].max())
-    on = mesh_flags(mesh)
-    skipped = reachable_meshes(mesh, box, on)
-    for c in range(CHUNKS):
-        collide_meshes_chunk(pos, last, free, mesh, on, c)
-    return skipped
+def reach(g: MeshGroup, box: np.ndarray, on: np.ndarray, offset: float) -> int:
+    """Mark the meshes the cloth's box reaches in ``on``; returns how many were ruled out."""
+    return reachable_meshes(g, box, on)
+
+
+@njit(**EXACT)
+def collide(g: MeshGroup, pos: np.ndarray, last: np.ndarray, free: np.ndarray, c: int, on: np.ndarray,
+            offset: float) -> None:
+    """Work item ``c`` of the free points against the reachable meshes: :func:`collide_meshes_chunk`
+    called by its address (``g.collide``, see :func:`collide_address`), so that it is compiled on
+    its own, once per group type, and not again inside every kernel that runs the pass."""
+    call_native(g.collide, (pos, last, free, g, on, np.int64(c)))
+
+
+def collide_types(pos: types.Type, last: types.Type, free: types.Type, group: types.Type) -> tuple:
+    """The argument types :func:`collide_meshes_chunk` is compiled for, given those of the state."""
+    return (pos, last, free, group, types.Array(types.bool_, 1, "C"), types.int64)
+
+
+def collide_address(g: MeshGroup, pos: np.ndarray, last: np.ndarray, free: np.ndarray) -> int:
+    """The address of :func:`collide_meshes_chunk` compiled (or loaded) for these arrays."""
+    return native_address(collide_meshes_chunk, collide_types(*(numba.typeof(x) for x in (pos, last, free, g))))

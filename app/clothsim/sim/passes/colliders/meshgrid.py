@@ -6,7 +6,7 @@ the pseudo-normals that tell inside from outside (face normals, edge normals = t
 of the two faces' normals, and angle-weighted vertex normals: Baerentzen and Aanaes, "Signed
 distance computation using the angle weighted pseudonormal", IEEE TVCG 2005), its pose (the
 translation at the substep's start and end: put there each substep for a moving mesh by
-:func:`clothsim.sim.passes.colliders.moving.update_poses`, like every moving collider), and a
+:func:`clothsim.sim.passes.colliders.mesh.pose` from its :class:`~.moving.Tracks`), and a
 uniform grid of its triangles.
 
 The grid: cubic cells of edge ``h`` over the mesh's bounding box; a triangle is listed in every
@@ -32,6 +32,7 @@ import numpy as np
 
 from ....scene import Scene
 from ...clock import track_at
+from .moving import Tracks, pack_tracks
 
 #: Columns of ``MeshGroup.info`` (float64) and ``MeshGroup.dims`` (int64), one row per mesh.
 INFO_LO, INFO_HI, INFO_INV_H, INFO_FRICTION, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK = 0, 3, 6, 7, 8, 9, 10
@@ -68,6 +69,8 @@ class MeshGroup(NamedTuple):
     near_tris: np.ndarray  # (M, N, NEAR_ROOM) int32 the list: every triangle whose box comes within reach
     pose: np.ndarray  # (M, 6) translation at the substep's start and at its end
     thickness: float
+    on: np.ndarray  # (M,) bool: the reach flags
+    tracks: Tracks | None  # the moving meshes' translations (None when none moves)
     #: address of the mesh pass compiled for this group (see :func:`clothsim.sim.solvers.frame.kernel_addresses`); 0 until known
     collide: int = 0
 
@@ -147,8 +150,9 @@ def build_grid(verts: np.ndarray, tris: np.ndarray, margin: float
     return lo, hi, inv_h, (int(n[0]), int(n[1]), int(n[2])), np.cumsum(start), cell_tris
 
 
-def mesh_group(scene: Scene) -> MeshGroup | None:
-    """The scene's meshes packed for the kernels, or None when it has none."""
+def mesh_group(scene: Scene, clock: np.ndarray | None = None, dt: float = 0.0) -> MeshGroup | None:
+    """The scene's meshes packed for the kernels, or None when it has none; ``clock`` and ``dt``
+    are the simulation's clock and substep length (none: a group whose meshes never move)."""
     if not scene.meshes:
         return None
     verts, tris, fnorm, enorm, vnorm, starts, cells = ([] for _ in range(7))
@@ -200,7 +204,9 @@ def mesh_group(scene: Scene) -> MeshGroup | None:
                      np.ascontiguousarray(np.concatenate(vnorm)), info, dims, cell_start,
                      cell_tris, np.ascontiguousarray(tbox[cell_tris]), np.full((len(scene.meshes), n_points, 3), np.inf),
                      np.full((len(scene.meshes), n_points), -1, dtype=np.int64),
-                     np.zeros((len(scene.meshes), n_points, NEAR_ROOM), dtype=np.int32), pose, float(thickness))
+                     np.zeros((len(scene.meshes), n_points, NEAR_ROOM), dtype=np.int32), pose, float(thickness),
+                     np.zeros(len(scene.meshes), dtype=np.bool_),
+                     None if clock is None else pack_tracks(scene.meshes, clock, dt))
 
 
 def cells_per_mesh(group: MeshGroup) -> list[int]:
