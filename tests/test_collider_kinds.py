@@ -72,7 +72,9 @@ def test_a_plan_holds_the_groups_of_the_kinds_its_scene_has_in_registry_order() 
     data = _scene(False)
     del data["capsule"], data["sphere"]
     sim = Simulation(scene_from_dict(data, "k.json"))
-    assert list(_groups(sim)) == ["plane", "box", "mesh"]
+    # the course's kinds are in every plan with colliders, empty when the scene has none of them
+    assert list(_groups(sim)) == ["sphere", "plane", "box", "mesh"]
+    assert len(_groups(sim)["sphere"].rows) == 0
     assert all(g.tracks is None for g in sim.plan.colliders)
 
 

@@ -280,10 +280,13 @@ def test_the_kernel_pose_follows_the_track_and_reset_puts_it_back() -> None:
 
 
 def test_a_scene_plans_only_the_collider_kinds_it_has_and_no_motion_when_nothing_moves() -> None:
-    # what keeps the other kinds' code, and the moving code, out of the compiled kernel
+    # what keeps the other kinds' code, and the moving code, out of the compiled kernel; the
+    # course's kinds are always there (a plane-less sphere scene shares the course's plan)
     sim = Simulation(load_scene("sphere"))
-    assert [type(g).__name__ for g in sim.plan.colliders] == ["Spheres"]
+    assert [type(g).__name__ for g in sim.plan.colliders] == ["Spheres", "Planes"]
+    assert [len(g.rows) for g in sim.plan.colliders] == [1, 0]
     assert all(g.tracks is None and g.carry is None for g in sim.plan.colliders)
+    assert Simulation(load_scene("pinned2")).plan.colliders == ()
     assert math.isclose(sim.time, 0.0)
 
 

@@ -94,7 +94,7 @@ def test_bench_compile_reports_each_kernel_of_a_cold_start() -> None:
     assert command.startswith("simulate: clothsim simulate pinned2 --frames 90")
     wall, compile_s = (float(x) for x in command.split()[-2:])
     assert 0 < compile_s < wall
-    assert "sim.solvers.frame._member [ClothState, SpecHash, -, -, -, -, -, -, -]" in out
+    assert "sim.solvers.frame._member [ClothState, SpecHash, -, -, -, -, -, -]" in out
     assert "sim.solvers.frame.run_substeps" in out
 
 
@@ -126,7 +126,7 @@ print(sum(s.cache_hits.values()), sum(s.cache_misses.values()))
 def test_a_change_to_any_kernel_module_makes_every_cached_kernel_stale(tmp_path: Path) -> None:
     # Numba alone keys a cache on the kernel's own file; a kernel compiled against another module's
     # old code (after an upgrade) was loaded and ran it, or crashed. Here the rest detector must be
-    # recompiled when passes/colliders/primitives.py, which it does not even call, changes, and loaded when nothing did.
+    # recompiled when passes/colliders/box.py, which it does not even call, changes, and loaded when nothing did.
     site = tmp_path / "site"
     shutil.copytree(REPO / "app" / "clothsim", site / "clothsim",
                     ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
@@ -142,7 +142,7 @@ def test_a_change_to_any_kernel_module_makes_every_cached_kernel_stale(tmp_path:
 
     assert hits_and_misses() == (0, 1)  # compiled, into the copy's __pycache__
     assert hits_and_misses() == (1, 0)  # loaded
-    collide = site / "clothsim" / "sim" / "passes" / "colliders" / "primitives.py"
+    collide = site / "clothsim" / "sim" / "passes" / "colliders" / "box.py"
     collide.write_text(collide.read_text() + "\n# changed\n")
     assert hits_and_misses() == (0, 1)  # stale: compiled again
     assert hits_and_misses() == (1, 0)

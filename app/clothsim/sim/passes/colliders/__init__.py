@@ -5,9 +5,12 @@ A collider kind is one module of this package (:mod:`.sphere` is the simplest) t
 
 * ``Group``: a ``NamedTuple`` of its flat arrays: its rows, its reach flags ``on`` (one per
   collider) and the :class:`~.moving.Tracks` of its moving colliders (None when none moves);
-* ``pack(scene, clock, dt, swept)``: its group for a scene, or None when the scene has none of
-  the kind; ``clock`` and ``dt`` are the simulation's one clock and substep length, ``swept``
-  says that something in the scene moves (the sphere and the plane then take their swept tests);
+* ``pack(scene, clock, dt, swept)``: its group for a scene that has colliders of the kind;
+  ``clock`` and ``dt`` are the simulation's one clock and substep length, ``swept``
+  says that something in the scene moves (the sphere and the plane then take their swept tests).
+  A kind with ``ALWAYS = True`` (the course's sphere and plane) is in every plan with colliders,
+  its group empty when the scene has none of it, so that scenes with either or both share one
+  compiled plan;
 * ``pose(g, substep)``: compiled; puts its moving colliders at their pose for substep
   ``substep`` of the call (:func:`~.moving.pose_rows` does it for rows of points);
 * ``reach(g, box, on, offset) -> int``: compiled; marks in ``on`` which colliders the cloth's
@@ -57,9 +60,13 @@ def _module(group_type) -> ModuleType:  # noqa: ANN001
 
 
 def plan_colliders(scene: Any, clock: np.ndarray, dt: float) -> tuple:
-    """The groups of the collider kinds ``scene`` has, in registry order (a plan's ``colliders``)."""
+    """The groups of the collider kinds ``scene`` has (and of the ``ALWAYS`` kinds, when it has
+    any collider), in registry order: a plan's ``colliders``; empty without colliders."""
+    if not scene.colliders:
+        return ()
     swept = any(spec.motion is not None for spec in scene.colliders)
-    return tuple(g for g in (module.pack(scene, clock, dt, swept) for module in KIND_MODULES) if g is not None)
+    return tuple(module.pack(scene, clock, dt, swept) for module, kind in zip(KIND_MODULES, KINDS)
+                 if getattr(scene, kind.attr) or getattr(module, "ALWAYS", False))
 
 
 def pose_colliders(cols: tuple, substep: int) -> None:

@@ -36,10 +36,8 @@ class Boxes(NamedTuple):
 Group = Boxes
 
 
-def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> Boxes | None:
-    """The group of ``scene``'s boxes (None without any)."""
-    if not scene.boxes:
-        return None
+def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> Boxes:
+    """The group of ``scene``'s boxes."""
     rows = np.array([[*b.center, *b.half_extents, *(x for r in b.matrix() for x in r), b.friction, 0.0, 0.0, 0.0]
                      for b in scene.boxes], dtype=np.float64)
     return Boxes(rows, np.zeros(len(rows), dtype=np.bool_), pack_tracks(scene.boxes, clock, dt, lambda b: b.center))

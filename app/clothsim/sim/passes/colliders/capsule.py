@@ -35,10 +35,8 @@ class Capsules(NamedTuple):
 Group = Capsules
 
 
-def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> Capsules | None:
-    """The group of ``scene``'s capsules (None without any)."""
-    if not scene.capsules:
-        return None
+def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> Capsules:
+    """The group of ``scene``'s capsules."""
     rows = np.array([[*c.a, *c.b, c.radius, c.friction, 0.0, 0.0, 0.0] for c in scene.capsules], dtype=np.float64)
     return Capsules(rows, np.zeros(len(rows), dtype=np.bool_),
                     pack_tracks(scene.capsules, clock, dt, lambda c: (*c.a, *c.b)))

@@ -439,8 +439,8 @@ def mesh_targets(pos: np.ndarray, last: np.ndarray, mesh: tuple, brute: bool) ->
 Group = MeshGroup
 
 
-def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> MeshGroup | None:
-    """The group of ``scene``'s meshes, their grids built (None without any)."""
+def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> MeshGroup:
+    """The group of ``scene``'s meshes, their grids built."""
     return mesh_group(scene, clock, dt)
 
 

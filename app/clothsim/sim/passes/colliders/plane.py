@@ -35,12 +35,14 @@ class Planes(NamedTuple):
 
 
 Group = Planes
+#: In every plan with colliders, empty when the scene has no planes: the course's kinds, so that the
+#: course's scenes (a sphere, a plane, both) share one compiled plan, as they always have.
+ALWAYS = True
 
 
-def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> Planes | None:
-    """The group of ``scene``'s planes (None without any); ``swept``: something in the scene moves."""
-    if not scene.planes:
-        return None
+def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> Planes:
+    """The group of ``scene``'s planes; ``swept``: something in the scene moves. Always a group,
+    empty for a scene without planes (see :data:`ALWAYS`)."""
     rows = np.array([[*p.point, *p.normal, p.friction] for p in scene.planes], dtype=np.float64).reshape(-1, 7)
     return Planes(rows, np.zeros(len(rows), dtype=np.bool_), np.zeros((len(rows), 3)) if swept else None,
                   pack_tracks(scene.planes, clock, dt, lambda p: p.point))

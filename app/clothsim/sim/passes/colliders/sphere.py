@@ -32,12 +32,14 @@ class Spheres(NamedTuple):
 
 
 Group = Spheres
+#: In every plan with colliders, empty when the scene has no spheres: the course's kinds, so that the
+#: course's scenes (a sphere, a plane, both) share one compiled plan, as they always have.
+ALWAYS = True
 
 
-def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> Spheres | None:
-    """The group of ``scene``'s spheres (None without any); ``swept``: something in the scene moves."""
-    if not scene.spheres:
-        return None
+def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> Spheres:
+    """The group of ``scene``'s spheres; ``swept``: something in the scene moves. Always a group,
+    empty for a scene without spheres (see :data:`ALWAYS`)."""
     rows = np.array([[*s.origin, s.radius, s.friction] for s in scene.spheres], dtype=np.float64).reshape(-1, 5)
     return Spheres(rows, np.zeros(len(rows), dtype=np.bool_), np.zeros((len(rows), 3)) if swept else None,
                    pack_tracks(scene.spheres, clock, dt, lambda s: s.origin))
