@@ -98,28 +98,32 @@ def test_the_scene_writer_round_trips_every_kind() -> None:
 
 
 @pytest.mark.parametrize("integrator", ["verlet", "symplectic_euler"])
-def test_every_kind_is_posed_from_the_one_clock(integrator: str) -> None:
+@pytest.mark.parametrize("kinds", [(k,) for k in KEYS])
+def test_every_kind_is_posed_from_the_one_clock(integrator: str, kinds: tuple[str, ...]) -> None:
     # After a frame every moving collider stands where its track puts it at the simulation's
-    # time, bit for bit: the kernels' clock and the Python one are the same clock.
+    # time, bit for bit: the kernels' clock and the Python one are the same clock. (One kind a
+    # scene: the team's launcher for a plan with all five moving takes over a minute to compile.)
     from clothsim.sim import Simulation
 
-    data = _scene(True)
+    data = {k: v for k, v in _scene(True).items() if k not in KEYS or k in kinds}
     data["simulation"]["integrator"] = integrator
     sim = Simulation(scene_from_dict(data, "k.json"))
     sim.step(2)
     t = sim.time
     scene = sim.scene
     groups = _groups(sim)
-    for spec, key in ((scene.spheres[0], "sphere"), (scene.planes[0], "plane"), (scene.boxes[0], "box")):
+    for spec, key in ((s, k) for k in ("sphere", "plane", "box") if k in kinds for s in getattr(scene, BY_KEY[k].attr)):
         anchor = np.asarray(spec.anchor)
         assert np.array_equal(groups[key].rows[0, :3], anchor + (spec.motion.track(spec.anchor).at(t) - anchor))
-    capsule = scene.capsules[0]
-    shift = capsule.motion.track(capsule.anchor).at(t) - np.asarray(capsule.anchor)
-    assert np.array_equal(groups["capsule"].rows[0, :3], np.asarray(capsule.a) + shift)
-    mesh = scene.meshes[0]
-    assert np.array_equal(groups["mesh"].pose[0, 3:], mesh.track().at(t))
-    before = scene.meshes[0].track().at(t - sim.dt)
-    assert np.allclose(groups["mesh"].pose[0, :3], before, rtol=0, atol=1e-15)
+    if "capsule" in kinds:
+        capsule = scene.capsules[0]
+        shift = capsule.motion.track(capsule.anchor).at(t) - np.asarray(capsule.anchor)
+        assert np.array_equal(groups["capsule"].rows[0, :3], np.asarray(capsule.a) + shift)
+    if "mesh" in kinds:
+        mesh = scene.meshes[0]
+        assert np.array_equal(groups["mesh"].pose[0, 3:], mesh.track().at(t))
+        before = scene.meshes[0].track().at(t - sim.dt)
+        assert np.allclose(groups["mesh"].pose[0, :3], before, rtol=0, atol=1e-15)
 
 
 def test_static_colliders_are_posed_once_and_stay() -> None:
