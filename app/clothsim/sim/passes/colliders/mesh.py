@@ -385,35 +385,10 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
 
 
 @njit(**EXACT)
-def reachable_meshes(mesh: tuple | None, box: np.ndarray, on: np.ndarray) -> int:
-    """Mark the meshes the cloth's bounding box (current and last positions) may touch during
-    this substep (at their poses); returns how many were ruled out. A mesh's box, over both
-    translations of the substep and widened by the thickness, that misses the cloth's box can
-    neither be crossed nor come within the thickness of a point, so skipping it is exact."""
-    if mesh is None:
-        return 0
-    skipped = 0
-    for m in range(mesh.dims.shape[0]):
-        before = mesh.pose[m, :3]
-        after = mesh.pose[m, 3:]
-        hit = True
-        for c in range(3):
-            lo = mesh.info[m, INFO_LO + c] + min(before[c], after[c]) - mesh.thickness
-            hi = mesh.info[m, INFO_HI + c] + max(before[c], after[c]) + mesh.thickness
-            if hi < box[c] or lo > box[3 + c]:
-                hit = False
-        on[m] = hit
-        skipped += 0 if hit else 1
-    return skipped
-
-
-@njit(**EXACT)
-def collide_meshes_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple | None, on: np.ndarray,
+def collide_meshes_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple, on: np.ndarray,
                          c: int) -> None:
     """Work item ``c`` (of CHUNKS) of the mesh pass: the c-th part of the free points against
     every reachable mesh at its pose, in scene order."""
-    if mesh is None:
-        return
     n = free.shape[0]
     f0, f1 = share(n, c, CHUNKS)
     part = free[f0:f1]
@@ -469,8 +444,23 @@ def pose(g: MeshGroup, substep: int) -> None:
 
 @njit(**EXACT)
 def reach(g: MeshGroup, box: np.ndarray, on: np.ndarray, offset: float) -> int:
-    """Mark the meshes the cloth's box reaches in ``on``; returns how many were ruled out."""
-    return reachable_meshes(g, box, on)
+    """Mark the meshes the cloth's bounding box (current and last positions) may touch during
+    this substep (at their poses); returns how many were ruled out. A mesh's box, over both
+    translations of the substep and widened by the thickness, that misses the cloth's box can
+    neither be crossed nor come within the thickness of a point, so skipping it is exact."""
+    skipped = 0
+    for m in range(g.dims.shape[0]):
+        before = g.pose[m, :3]
+        after = g.pose[m, 3:]
+        hit = True
+        for c in range(3):
+            lo = g.info[m, INFO_LO + c] + min(before[c], after[c]) - g.thickness
+            hi = g.info[m, INFO_HI + c] + max(before[c], after[c]) + g.thickness
+            if hi < box[c] or lo > box[3 + c]:
+                hit = False
+        on[m] = hit
+        skipped += 0 if hit else 1
+    return skipped
 
 
 @njit(**EXACT)
