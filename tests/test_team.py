@@ -3,6 +3,7 @@ cannot run side by side or one of them never comes, and recovery afterwards."""
 
 from __future__ import annotations
 
+import sys
 import time
 
 import numba
@@ -99,13 +100,12 @@ def test_a_frame_given_up_half_way_is_restored_and_run_alone(monkeypatch: pytest
     # simulation must restore the frame's start, run it alone, and try the team again later.
     real = frame.run_substeps
 
-    def lost_member(steps, *rest):  # noqa: ANN001, ANN202
-        *groups, sync, size, passes, address = rest
+    def lost_member(steps, plan, sync, size, passes, *addresses):  # noqa: ANN001, ANN202
         if size == 1:
-            return real(steps, *groups, sync, size, passes, address)
+            return real(steps, plan, sync, size, passes, *addresses)
         sync[:] = 0
         sync[team.MODE] = team._TEAM
-        frame._member(0, size, steps, *groups, sync, passes)
+        frame._member(0, size, steps, *plan, sync, passes)
         return 0
 
     scene = _scene("pinned4")
@@ -203,24 +203,25 @@ def test_team_counting_sort_matches_the_serial_sort(size: int) -> None:
     assert sorted(busy[taken].tolist()) == busy0[:nb0].tolist()
 
 
-def test_a_tuple_of_groups_reaches_every_thread_of_a_parallel_loop_whole(all_threads: int) -> None:
-    # The team's loop hands its threads a flat tuple and the nested type (a parallel loop opens one
-    # level of tuple); every thread must rebuild the same groups, arrays shared, not copied.
+def test_groups_handed_by_address_reach_every_thread_of_a_parallel_loop_whole(all_threads: int) -> None:
+    # The collider pass hands a parallel loop's threads its tuple of groups by address (a
+    # parallel loop takes no tuple of groups); every thread must see the same groups, arrays
+    # shared, not copied, and a write through them must survive Numba's dead-code pass.
     from collections import namedtuple
 
     from numba import njit, prange
 
-    from clothsim.jit.internals import flatten, type_ref, unflatten
+    from clothsim.jit.internals import load_value, stack_address, type_ref
 
     Inner = namedtuple("Inner", ["a", "k", "gone"])
     Outer = namedtuple("Outer", ["inner", "b", "x"])
 
     @njit(parallel=True)
     def each_thread_reads(groups: tuple, out: np.ndarray) -> None:
-        flat = flatten(groups)
+        at = stack_address(groups)
         proto = type_ref(groups)
         for m in prange(out.shape[0]):
-            g = unflatten(flat, proto)
+            g = load_value(at, proto)
             o = g[1]
             o.inner.a[m] = m  # the caller's array itself
             out[m] = o.inner.k + o.b.sum() + o.x + (1.0 if o.inner.gone is None else 0.0) + g[0][0]
@@ -228,6 +229,8 @@ def test_a_tuple_of_groups_reaches_every_thread_of_a_parallel_loop_whole(all_thr
     a = np.zeros(all_threads * 2)
     groups = ((5.0,), Outer(Inner(a, 2.0, None), np.array([1.0, 2.0]), 0.5))
     out = np.zeros(all_threads * 2)
+    refs = sys.getrefcount(a)
     each_thread_reads(groups, out)
     assert np.array_equal(out, np.full(out.shape, 2.0 + 3.0 + 0.5 + 1.0 + 5.0))
+    assert sys.getrefcount(a) == refs
     assert np.array_equal(a, np.arange(a.size))

@@ -1,5 +1,5 @@
-"""Every use of Numba's private API, in one place: call-by-address, nested tuples handed
-through a parallel loop (:func:`flatten`), the compiled-or-cached test,
+"""Every use of Numba's private API, in one place: call-by-address, values handed to a kernel
+called by address or to a parallel loop's threads (:func:`stack_address`), the compiled-or-cached test,
 the package-wide cache stamp, and the thread team's atomics and clock (LLVM IR through
 ``numba.core.cgutils``). :func:`missing_private_api` names what a Numba release lacks (the
 test suite checks it, so an upgrade that removes any of it fails there with that name, not with a
@@ -205,44 +205,59 @@ def call_native(typingctx, address, args):  # noqa: ANN001, ANN201
     return sig, codegen
 
 
-def _leaves(ty: types.Type) -> list[types.Type]:
-    """The types of the values nested in ``ty``, depth first (``ty`` itself when it is no tuple)."""
+@intrinsic
+def stack_address(typingctx, value):  # noqa: ANN001, ANN201
+    """The address of a copy of ``value`` on the calling function's stack, valid until that
+    function returns, for :func:`load_value` in a kernel it calls by address (the arrays in it are
+    the caller's, borrowed: see :func:`_unowned`).
+
+    A kernel called by address with the address of its arguments has one signature for every
+    type of argument: the thread team's launcher is compiled once, not once per plan.
+    """
+    sig = types.int64(value)
+
+    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
+        slot = cgutils.alloca_once(builder, context.get_value_type(sig.args[0]))
+        builder.store(_unowned(context, builder, sig.args[0], args[0]), slot)
+        return builder.ptrtoint(slot, ir.IntType(64))
+
+    return sig, codegen
+
+
+def _unowned(context, builder, ty: types.Type, value: Any) -> Any:  # noqa: ANN001
+    """``value`` with every array in it detached from its owner (no meminfo, no parent object), as
+    a parallel loop hands arrays to its threads: Numba then counts no references to them. Counted
+    references cost an atomic add on a counter the threads share at every array the callee passes
+    on: the `mesh` scene's team frame took 5 -> 58 ms with them."""
     if isinstance(ty, types.BaseTuple):
-        return [leaf for t in ty.types for leaf in _leaves(t)]
-    return [ty]
+        for i, t in enumerate(ty.types):
+            value = builder.insert_value(value, _unowned(context, builder, t, builder.extract_value(value, i)), i)
+        return value
+    if isinstance(ty, types.Array):
+        ary = context.make_array(ty)(context, builder, value=value)
+        ary.meminfo = cgutils.get_null_value(ary.meminfo.type)
+        ary.parent = cgutils.get_null_value(ary.parent.type)
+        return ary._getvalue()
+    return value
 
 
 @intrinsic
-def flatten(typingctx, value):  # noqa: ANN001, ANN201
-    """The values nested in ``value`` (a tuple of groups, say) as one flat tuple, depth first, for
-    :func:`unflatten`.
-
-    A parallel loop passes each value it reads to its threads as an argument of Numba's gufunc,
-    which opens one level of tuple (a group of arrays and scalars) but not a tuple of groups; a
-    flat tuple and a :func:`type_ref` of the nested one pass through any loop.
-    """
-    sig = types.BaseTuple.from_types(_leaves(value))(value)
+def load_value(typingctx, address, proto):  # noqa: ANN001, ANN201
+    """The value of type ``proto`` (a :func:`type_ref`) that :func:`stack_address` gave ``address``
+    of; its arrays stay the caller's."""
+    ty = proto.instance_type
+    sig = ty(address, proto)
 
     def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
-        values = []
-
-        def walk(ty: types.Type, value: Any) -> None:
-            if isinstance(ty, types.BaseTuple):
-                for i, t in enumerate(ty.types):
-                    walk(t, builder.extract_value(value, i))
-            else:
-                values.append(value)
-
-        walk(sig.args[0], args[0])
-        return impl_ret_borrowed(context, builder, sig.return_type,
-                                 context.make_tuple(builder, sig.return_type, values))
+        slot = builder.inttoptr(args[0], context.get_value_type(ty).as_pointer())
+        return impl_ret_borrowed(context, builder, ty, builder.load(slot))
 
     return sig, codegen
 
 
 @intrinsic
 def type_ref(typingctx, value):  # noqa: ANN001, ANN201
-    """The type of ``value`` as a value (no data), for :func:`unflatten`."""
+    """The type of ``value`` as a value (no data), for :func:`load_value`."""
     sig = types.TypeRef(value)(value)
 
     def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
@@ -251,37 +266,17 @@ def type_ref(typingctx, value):  # noqa: ANN001, ANN201
     return sig, codegen
 
 
-@intrinsic
-def unflatten(typingctx, flat, proto):  # noqa: ANN001, ANN201
-    """The nested value that :func:`flatten` made ``flat`` of; ``proto`` is its :func:`type_ref`."""
-    ty = proto.instance_type
-    if [*flat.types] != _leaves(ty):
-        return None
-    sig = ty(flat, proto)
-
-    def codegen(context, builder, sig, args):  # noqa: ANN001, ANN202
-        leaves = iter(cgutils.unpack_tuple(builder, args[0], len(flat.types)))
-
-        def build(ty: types.Type) -> Any:
-            if isinstance(ty, types.BaseTuple):
-                return context.make_tuple(builder, ty, [build(t) for t in ty.types])
-            return next(leaves)
-
-        return impl_ret_borrowed(context, builder, ty, build(ty))
-
-    return sig, codegen
+def _holds_the_callers_arrays(lhs: str, args: list, alias_map: dict, arg_aliases: set | dict) -> None:
+    # a set in the dead-code analysis; when a parallel loop is lowered Numba passes an empty dict
+    # that nothing may be added to (its own _add_alias would then fail on it)
+    if isinstance(arg_aliases, set):
+        arg_aliases.add(lhs)
 
 
-def _aliases_its_arguments(lhs: str, args: list, alias_map: dict, arg_aliases: set) -> None:
-    for arg in args:
-        ir_utils._add_alias(lhs, arg.name, alias_map, arg_aliases)
-
-
-# What flatten and unflatten return holds the arrays they were given: without saying so, Numba's
-# dead-code pass took a write through the result, inside a parallel loop, for a write to a fresh
-# array nobody reads, and dropped it.
-for _name in ("flatten", "unflatten"):
-    ir_utils.alias_func_extensions[(_name, __name__)] = _aliases_its_arguments
+# What load_value returns holds the caller's arrays: without saying so, Numba's dead-code pass may
+# take a write through it, inside a parallel loop, for a write to a fresh array nobody reads, and
+# drop it (seen with the tuples handed to the threads before load_value).
+ir_utils.alias_func_extensions[("load_value", __name__)] = _holds_the_callers_arrays
 
 
 def native_address(kernel: Any, argtypes: tuple) -> int:
@@ -329,9 +324,8 @@ def missing_private_api() -> list[str]:
                  "get_or_insert_function", "gep_inbounds"):
         if not hasattr(cgutils, name):
             missing.append(f"numba.core.cgutils.{name}")
-    for name in ("alias_func_extensions", "_add_alias"):
-        if not hasattr(ir_utils, name):
-            missing.append(f"numba.core.ir_utils.{name}")
+    if not hasattr(ir_utils, "alias_func_extensions"):
+        missing.append("numba.core.ir_utils.alias_func_extensions")
     for name in ("_get_arg_packer", "_get_return_status", "get_function_type", "get_return_type"):
         if not hasattr(CPUCallConv, name):
             missing.append(f"numba.core.callconv.CPUCallConv.{name}")

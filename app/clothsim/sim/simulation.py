@@ -13,7 +13,7 @@ from ..wind import WINDS
 from . import team
 from .passes.colliders import plan_colliders
 from .passes.colliders.plane import SURFACE_OFFSET
-from .solvers.frame import PASS_ALL, kernel_addresses, run_substeps, with_mesh_address
+from .solvers.frame import PASS_ALL, Addresses, kernel_addresses, run_substeps, with_mesh_address
 from .passes.forces import plan_forces
 from .passes.wind import triangles
 from ..jit import CHUNKS
@@ -274,9 +274,9 @@ class Simulation:
         self._clock[1] = 0.0
         self._clock_dt = self.dt
         self._kernel_args = self._pack()
-        # the member kernel's address for these groups, found on the first frame (typing the groups
+        # the addresses of the kernels that run these groups, found on the first frame (typing the groups
         # to look it up takes ~0.36 ms: a third of a frame, if done every frame)
-        self._member_at = 0
+        self._kernels: Addresses | None = None
 
     def _pack(self) -> Plan:
         """The frame kernel's state groups (:mod:`clothsim.sim.state`), ``None`` for a pass the
@@ -398,13 +398,15 @@ class Simulation:
         """Run the next ``steps`` substeps of the frame kernel (only the ``passes`` bits) with a
         team of ``size``; False when the team gave the frame up half-way (the state must be
         restored)."""
-        if not self._member_at:
-            self._member_at, repel, collide = kernel_addresses(self._kernel_args, self._sync)
+        if self._kernels is None:
+            self._kernels = kernel_addresses(self._kernel_args, self._sync)
             plan = self._kernel_args
             if plan.spec is not None:
-                plan = plan._replace(spec=plan.spec._replace(repel=repel))
-            self._kernel_args = with_mesh_address(plan, collide)
-        self.colliders_skipped += run_substeps(steps, *self._kernel_args, self._sync, size, passes, self._member_at)
+                plan = plan._replace(spec=plan.spec._replace(repel=self._kernels.repel))
+            self._kernel_args = with_mesh_address(plan, self._kernels.collide)
+        k = self._kernels
+        self.colliders_skipped += run_substeps(steps, self._kernel_args, self._sync, size, passes, k.member, k.enter,
+                                               k.launch)
         if passes == PASS_ALL:  # pass by pass (the profiler), the caller counts each substep once its passes ran
             self._clock[1] += steps
         if self._sync[team.FAILED]:

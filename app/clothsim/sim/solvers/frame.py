@@ -18,18 +18,25 @@ Colliders come as one tuple of the groups of the kinds the scene has
 the cloth's bounding box reaches and collides its own work items. The mesh kind's pass is called
 by address, like the spec hash's query, so that it compiles beside the member (in
 :func:`kernel_addresses`) and is not re-optimised inside it.
+
+Three kernels start a frame: :func:`run_substeps` (compiled per plan, small) copies the plan to
+its stack and calls the team's parallel loop, :func:`_launch`, with that copy's address; the loop
+is one compiled kernel for every plan, and each of its threads calls :func:`_enter` (per plan,
+small), which reads the plan back and calls the member. A parallel loop given the plan's groups
+themselves compiled for 5 s (one moving kind) to over a minute (five) per plan.
 """
 
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from numba import njit, prange, types
 
 from ...jit import CHUNKS, KERNEL, PARALLEL
-from ...jit.internals import call_native, flatten, native_address, type_ref, unflatten
+from ...jit.internals import call_native, load_value, native_address, stack_address, type_ref
 
 from ..passes.forces import force_gather, force_work
 from ..passes.colliders import any_moving, collide_colliders, member_flags, pose_colliders, reach_colliders
@@ -236,12 +243,13 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
 
 
 @lru_cache(maxsize=None)
-def _addresses(argtypes: tuple) -> tuple[int, int, int]:
+def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
     from ...jit.compile import compile_elsewhere, warm_side_kernels
     from .. import guard, rest  # noqa: F401 - they register their kernels' warm-up on import
 
     # argtypes = (member, size, steps, *the Plan's groups, sync, passes)
     groups = Plan(*argtypes[3 : 3 + len(Plan._fields)])
+    sync = argtypes[3 + len(Plan._fields)]
     st, spec = groups.st, groups.spec
     i64 = types.int64
     repel = None
@@ -261,80 +269,98 @@ def _addresses(argtypes: tuple) -> tuple[int, int, int]:
         # the mesh pass too: compiled here meanwhile, and kept out of the member's module
         collide = collide_types(st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
                                 col.types[col.fields.index("free")], meshes[0])
+    enter = (i64, i64, i64, i64, i64, sync, i64, types.TypeRef(plan_type))
+    launch = (i64, i64, i64, i64, sync, i64, i64)
 
     def meanwhile() -> None:
         if repel is not None:
             repel_slots.compile(repel)
         if collide is not None:
             collide_meshes_chunk.compile(collide)
-        run_substeps.compile((i64, *groups, argtypes[3 + len(Plan._fields)], i64, i64, i64))
+        _enter.compile(enter)
+        _launch.compile(launch)
+        run_substeps.compile((i64, plan_type, sync, i64, i64, i64, i64, i64))
         warm_side_kernels()
 
     compile_elsewhere(_member, argtypes, meanwhile)
-    return (native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel),
-            0 if collide is None else native_address(collide_meshes_chunk, collide))
+    return Addresses(native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel),
+                     0 if collide is None else native_address(collide_meshes_chunk, collide),
+                     native_address(_enter, enter), native_address(_launch, launch))
 
 
-def kernel_addresses(plan: Plan, sync: np.ndarray) -> tuple[int, int, int]:
-    """Addresses of :func:`_member` compiled for these state groups, of the
-    :func:`~clothsim.sim.passes.selfcollide.repel_slots` it calls (0 without the spec's hash) and of the
-    :func:`~clothsim.sim.passes.colliders.mesh.collide_meshes_chunk` it calls (0 without meshes), compiled or
-    loaded from the cache on first use; the second goes into ``SpecHash.repel``, the third into
-    ``MeshGroup.collide``."""
+class Addresses(NamedTuple):
+    """Where a plan's compiled kernels are (see :func:`kernel_addresses`)."""
+
+    #: :func:`_member` compiled for the plan's groups
+    member: int
+    #: :func:`~clothsim.sim.passes.selfcollide.repel_slots`, which the member calls (0 without the spec's hash)
+    repel: int
+    #: :func:`~clothsim.sim.passes.colliders.mesh.collide_meshes_chunk`, which the member calls (0 without meshes)
+    collide: int
+    #: :func:`_enter` compiled for the plan's type
+    enter: int
+    #: :func:`_launch` (one for every plan)
+    launch: int
+
+
+def kernel_addresses(plan: Plan, sync: np.ndarray) -> Addresses:
+    """Addresses of the kernels that run ``plan`` (:class:`Addresses`), compiled or loaded from
+    the cache on first use; ``repel`` goes into ``SpecHash.repel``, ``collide`` into
+    ``MeshGroup.collide`` (:func:`with_mesh_address`), the rest to :func:`run_substeps`."""
     i64 = types.int64
-    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (*plan, sync)), i64))
+    return _addresses((i64, i64, i64, *(numba.typeof(x) for x in (*plan, sync)), i64), numba.typeof(plan))
 
 
-@njit(inline="always", **KERNEL)
-def _turn(m: int, size: int, member: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
-          col: tuple | None, flat_colliders: tuple, colliders_type: types.TypeRef, flat_forces: tuple,
-          forces_type: types.TypeRef, pins: tuple | None, contact: tuple | None, sync: np.ndarray, passes: int) -> None:
-    """Iteration ``m`` of the team's parallel loop: answer the roll call and run the member."""
-    colliders = unflatten(flat_colliders, colliders_type)
-    forces = unflatten(flat_forces, forces_type)
-    working = roll_call(sync, size)
-    if working != 0:
-        # one call site, with int64 arguments: one compiled _member whoever runs it
-        me = 0
-        if working == size:
-            me = np.int64(m)
-        if call_native(member, (me, working, steps, st, spec, grid, col, colliders, forces, pins, contact, sync,
-                                passes)) != 0:
-            sync[FAILED] = 1
-            atomic_cas(sync, ABORT, 0, 1)
+@njit(**KERNEL)
+def _enter(me: int, working: int, steps: int, plan_at: int, member: int, sync: np.ndarray, passes: int,
+           plan_type: types.TypeRef) -> None:
+    """A team thread's way into the member: the plan from :func:`run_substeps`' stack, then the
+    member, both compiled for the plan; the launcher calls it by address, as one signature for
+    every plan."""
+    plan = load_value(plan_at, plan_type)
+    if call_native(member, (me, working, steps, plan.st, plan.spec, plan.grid, plan.col, plan.colliders, plan.forces,
+                            plan.pins, plan.contact, sync, passes)) != 0:
+        sync[FAILED] = 1
+        atomic_cas(sync, ABORT, 0, 1)
 
 
 @njit(**PARALLEL)
-def run_substeps(steps: int, st: tuple, spec: tuple | None, grid: tuple | None, col: tuple | None,
-                 colliders: tuple, forces: tuple, pins: tuple | None, contact: tuple | None, sync: np.ndarray,
-                 size: int, passes: int, member: int) -> int:
+def _launch(steps: int, plan_at: int, member: int, enter: int, sync: np.ndarray, size: int, passes: int) -> None:
+    """The team's parallel loop: each thread answers the roll call and enters the member. It sees
+    the plan only as an address, so it is compiled once for every plan (a parallel loop given the
+    plan's groups compiled for 5-72 s per plan)."""
+    for m in prange(size):
+        working = roll_call(sync, size)
+        if working != 0:
+            # one call site, with int64 arguments: one compiled _member whoever runs it
+            me = 0
+            if working == size:
+                me = np.int64(m)
+            call_native(enter, (me, working, steps, plan_at, member, sync, passes, type_ref(None)))
+
+
+@njit(**KERNEL)
+def run_substeps(steps: int, plan: Plan, sync: np.ndarray, size: int, passes: int, member: int, enter: int,
+                 launch: int) -> int:
     """Advance ``steps`` substeps of the spec's Verlet model; returns colliders skipped.
 
-    ``st``, ``spec``, ``grid``, ``col``, ``pins`` and ``contact`` are the named tuples of
-    :mod:`clothsim.sim.state`, ``colliders`` the groups of the collider kinds
-    (:mod:`clothsim.sim.passes.colliders`) and ``forces`` those of
-    :mod:`clothsim.sim.passes.forces` the scene uses; all but ``st`` and the two tuples are ``None``
-    for a pass the scene does not use (``colliders`` is empty when ``col`` is None). ``sync`` is
+    ``plan`` holds the named tuples of :mod:`clothsim.sim.state`: ``colliders`` the groups of the
+    collider kinds (:mod:`clothsim.sim.passes.colliders`), ``forces`` those of
+    :mod:`clothsim.sim.passes.forces` the scene uses, the other groups but ``st`` ``None`` for a
+    pass the scene does not use (``colliders`` is empty when ``col`` is None). ``sync`` is
     :func:`clothsim.sim.team.new_sync`'s array, ``size`` the team size (see
     :mod:`clothsim.sim.team`); the result does not depend on it. After the call
     ``sync[team.ABORT]`` set means the frame was given up half-way (restore and run it alone).
 
-    ``passes`` (PASS_* bits) runs only some passes, for :mod:`clothsim.sim.profile`; ``member``
-    is the first of :func:`kernel_addresses` for these groups. ``sync[team.FAILED]`` set after the call means a
-    member failed (it could not allocate its work space).
-
+    ``passes`` (PASS_* bits) runs only some passes, for :mod:`clothsim.sim.profile`; ``member``,
+    ``enter`` and ``launch`` are those of :func:`kernel_addresses` for this plan.
+    ``sync[team.FAILED]`` set after the call means a member failed (it could not allocate its
+    work space).
     """
-    st.skips[0] = 0
+    plan.st.skips[0] = 0
     sync[:] = 0
-    # the loop's threads take a flat tuple, not a tuple of groups (see jit.internals.flatten)
-    flat_colliders = flatten(colliders)
-    colliders_type = type_ref(colliders)
-    flat_forces = flatten(forces)
-    forces_type = type_ref(forces)
-    for m in prange(size):
-        _turn(m, size, member, steps, st, spec, grid, col, flat_colliders, colliders_type, flat_forces, forces_type,
-              pins, contact, sync, passes)
-    return st.skips[0]
+    call_native(launch, (steps, stack_address(plan), member, enter, sync, size, passes))
+    return plan.st.skips[0]
 
 
 def with_mesh_address(plan: Plan, address: int) -> Plan:

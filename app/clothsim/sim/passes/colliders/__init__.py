@@ -42,7 +42,7 @@ from numba.extending import overload
 
 from ....colliders import KINDS
 from ....jit import CHUNKS, KERNEL, PARALLEL, field_is_none
-from ....jit.internals import flatten, type_ref, unflatten
+from ....jit.internals import load_value, stack_address, type_ref
 from .bounds import cloth_bounds
 
 #: Every kind's pass module, in registry order (the order a point meets them).
@@ -158,8 +158,8 @@ def _any_moving(cols):  # noqa: ANN001, ANN202
 
 
 @njit(inline="always", **KERNEL)
-def _collide_chunk(pos: np.ndarray, last: np.ndarray, col: tuple, flat: tuple, cols_type: Any, c: int) -> None:
-    cols = unflatten(flat, cols_type)
+def _collide_chunk(pos: np.ndarray, last: np.ndarray, col: tuple, at: int, cols_type: Any, c: int) -> None:
+    cols = load_value(at, cols_type)
     collide_colliders(cols, pos, last, col.free, member_flags(cols, False), col.offset, c)
 
 
@@ -172,9 +172,10 @@ def collide_reachable(pos: np.ndarray, last: np.ndarray, col: tuple, cols: tuple
     pose_colliders(cols, substep)
     cloth_bounds(pos, last, col.box)
     skipped = reach_colliders(cols, col.box, member_flags(cols, False), col.offset)
-    # the loop's threads take a flat tuple, not a tuple of groups (see jit.internals.flatten)
-    flat = flatten(cols)
+    # the loop's threads take the groups by address: a parallel loop takes no tuple of groups,
+    # and given them flattened it compiled for up to a minute (see jit.internals.stack_address)
+    at = stack_address(cols)
     cols_type = type_ref(cols)
     for c in prange(CHUNKS):
-        _collide_chunk(pos, last, col, flat, cols_type, c)
+        _collide_chunk(pos, last, col, at, cols_type, c)
     return skipped
