@@ -228,7 +228,8 @@ def _unowned(context, builder, ty: types.Type, value: Any) -> Any:  # noqa: ANN0
     """``value`` with every array in it detached from its owner (no meminfo, no parent object), as
     a parallel loop hands arrays to its threads: Numba then counts no references to them. Counted
     references cost an atomic add on a counter the threads share at every array the callee passes
-    on: the `mesh` scene's team frame took 5 -> 58 ms with them."""
+    on, which made the team's frames several times slower (docs/performance.md, "The team's
+    launcher")."""
     if isinstance(ty, types.BaseTuple):
         for i, t in enumerate(ty.types):
             value = builder.insert_value(value, _unowned(context, builder, t, builder.extract_value(value, i)), i)

@@ -23,7 +23,8 @@ Three kernels start a frame: :func:`run_substeps` (compiled per plan, small) cop
 its stack and calls the team's parallel loop, :func:`_launch`, with that copy's address; the loop
 is one compiled kernel for every plan, and each of its threads calls :func:`_enter` (per plan,
 small), which reads the plan back and calls the member. A parallel loop given the plan's groups
-themselves compiled for 5 s (one moving kind) to over a minute (five) per plan.
+themselves was compiled per plan, and slowly for plans of many groups (docs/performance.md, "The
+team's launcher").
 """
 
 from __future__ import annotations
@@ -327,8 +328,8 @@ def _enter(me: int, working: int, steps: int, plan_at: int, member: int, sync: n
 @njit(**PARALLEL)
 def _launch(steps: int, plan_at: int, member: int, enter: int, sync: np.ndarray, size: int, passes: int) -> None:
     """The team's parallel loop: each thread answers the roll call and enters the member. It sees
-    the plan only as an address, so it is compiled once for every plan (a parallel loop given the
-    plan's groups compiled for 5-72 s per plan)."""
+    the plan only as an address, so it is compiled once for every plan (given the plan's groups,
+    it compiled for each plan, slowly for plans of many groups: docs/performance.md)."""
     for m in prange(size):
         working = roll_call(sync, size)
         if working != 0:

@@ -172,8 +172,8 @@ def collide_reachable(pos: np.ndarray, last: np.ndarray, col: tuple, cols: tuple
     pose_colliders(cols, substep)
     cloth_bounds(pos, last, col.box)
     skipped = reach_colliders(cols, col.box, member_flags(cols, False), col.offset)
-    # the loop's threads take the groups by address: a parallel loop takes no tuple of groups,
-    # and given them flattened it compiled for up to a minute (see jit.internals.stack_address)
+    # the loop's threads take the groups by address: a parallel loop takes no tuple of groups
+    # (see jit.internals.stack_address)
     at = stack_address(cols)
     cols_type = type_ref(cols)
     for c in prange(CHUNKS):
