@@ -200,6 +200,42 @@ def test_processes_compiling_one_kernel_at_once_leave_a_cache_every_process_can_
     assert done.stdout.split() == ["6", "0"]  # all six loaded, none compiled again
 
 
+_SAME_PLAN_PROBE = """
+import sys, time
+from clothsim.scene import load_scene
+from clothsim.sim import Simulation
+from clothsim.sim.solvers.frame import _member
+start = float(sys.argv[1])
+sim = Simulation(load_scene("pinned2").with_simulation(self_collision="off").with_cloth(num_width_points=8,
+                                                                                    num_height_points=8))
+while time.time() < start:  # both processes reach the first frame at the same moment
+    time.sleep(0.001)
+sim.step(1)
+s = _member.stats
+print(sum(s.cache_hits.values()), sum(s.cache_misses.values()))
+"""
+
+
+def test_processes_starting_one_plan_at_once_compile_it_once(tmp_path: Path) -> None:
+    # Two processes reach the first frame of the same plan at the same moment on a cold cache (the
+    # suite's workers, a sweep's local workers): one compiles the member kernel, the other waits
+    # for it and loads it from the cache.
+    import time
+
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env.update(NUMBA_CACHE_DIR=str(tmp_path / "cache"), CLOTHSIM_COMPILE_JOBS="1")
+    start = time.time() + 4.0  # after both have imported and built their scene
+    procs = [subprocess.Popen([sys.executable, "-c", _SAME_PLAN_PROBE, str(start)], env=env, cwd=tmp_path,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    counts = []
+    for p in procs:
+        out, err = p.communicate(timeout=240)
+        assert p.returncode == 0, err
+        counts.append(tuple(int(x) for x in out.split()))
+    # (cache hits, cache misses) of the member kernel in each process
+    assert sorted(counts) == [(0, 1), (1, 0)], counts
+
+
 def test_an_exact_kernel_stays_exact_whoever_calls_it_first() -> None:
     # Numba compiles a callee that leaves fastmath unset with its caller's flags and caches it
     # under its signature alone: an EXACT kernel first compiled by a fast-math caller was then

@@ -9,16 +9,20 @@ cache compiles nothing.
 
 from __future__ import annotations
 
+import fcntl
+import hashlib
 import os
 import pickle
 import subprocess
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
-from .internals import is_cached
+from .internals import cache_folder, is_cached
 
-__all__ = ["JOBS_VARIABLE", "available_cores", "compile_elsewhere", "on_warm", "warm_side_kernels"]
+__all__ = ["JOBS_VARIABLE", "available_cores", "compile_elsewhere", "compiling_alone", "on_warm",
+           "warm_side_kernels"]
 
 #: Set to 1 to compile everything in this process (no second process on a cold start).
 JOBS_VARIABLE = "CLOTHSIM_COMPILE_JOBS"
@@ -84,3 +88,32 @@ def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], 
         if child.poll() is None:  # interrupted: the second process goes too
             child.kill()
             child.wait()
+
+
+@contextmanager
+def compiling_alone(dispatcher: Any, argtypes: tuple) -> Iterator[None]:
+    """Hold a lock, for as long as the body runs, that every process sharing ``dispatcher``'s
+    cache folder takes for the same kernel and argument types.
+
+    The body compiles the kernel (and what goes with it) into the cache. Processes that start
+    the same plan at once on a cold cache (the test suite's workers, a sweep's local workers)
+    otherwise all compiled it, each on its own core; now the first compiles and the others wait,
+    then load it. A kernel cached already, or a cache folder where no lock file can be made, takes
+    no lock. The lock goes with its process (a killed process leaves nothing held).
+    """
+    folder = cache_folder(dispatcher)
+    if folder is None or is_cached(dispatcher, argtypes):
+        yield
+        return
+    func = dispatcher.py_func
+    key = hashlib.sha256(f"{func.__module__}.{func.__qualname__}{argtypes}".encode()).hexdigest()[:20]
+    try:
+        fd = os.open(os.path.join(folder, f"{func.__name__}.{key}.compiling"), os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError:
+        yield
+        return
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)  # releases the lock

@@ -299,6 +299,20 @@ def is_cached(dispatcher: Any, argtypes: tuple) -> bool:
         return False
 
 
+def cache_folder(dispatcher: Any) -> str | None:
+    """The folder where ``dispatcher``'s compiled code is cached (created if need be), or None
+    (no cache, or a folder that cannot be made)."""
+    cache = getattr(dispatcher, "_cache", None)
+    folder = getattr(cache, "_cache_path", None)
+    if not folder:
+        return None
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError:
+        return None
+    return folder
+
+
 def missing_private_api() -> list[str]:
     """The private Numba names this module needs that the installed Numba lacks (empty when all
     are there)."""

@@ -245,7 +245,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
 
 @lru_cache(maxsize=None)
 def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
-    from ...jit.compile import compile_elsewhere, warm_side_kernels
+    from ...jit.compile import compile_elsewhere, compiling_alone, warm_side_kernels
     from .. import guard, rest  # noqa: F401 - they register their kernels' warm-up on import
 
     # argtypes = (member, size, steps, *the Plan's groups, sync, passes)
@@ -283,10 +283,13 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         run_substeps.compile((i64, plan_type, sync, i64, i64, i64, i64, i64))
         warm_side_kernels()
 
-    compile_elsewhere(_member, argtypes, meanwhile)
-    return Addresses(native_address(_member, argtypes), 0 if repel is None else native_address(repel_slots, repel),
-                     0 if collide is None else native_address(collide_meshes_chunk, collide),
-                     native_address(_enter, enter), native_address(_launch, launch))
+    with compiling_alone(_member, argtypes):
+        compile_elsewhere(_member, argtypes, meanwhile)
+        # (compiled here, on one core or when the second process failed)
+        return Addresses(native_address(_member, argtypes),
+                         0 if repel is None else native_address(repel_slots, repel),
+                         0 if collide is None else native_address(collide_meshes_chunk, collide),
+                         native_address(_enter, enter), native_address(_launch, launch))
 
 
 class Addresses(NamedTuple):
