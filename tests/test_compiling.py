@@ -205,34 +205,36 @@ import sys, time
 from clothsim.scene import load_scene
 from clothsim.sim import Simulation
 from clothsim.sim.solvers.frame import _member
-start = float(sys.argv[1])
-sim = Simulation(load_scene("pinned2").with_simulation(self_collision="off").with_cloth(num_width_points=8,
-                                                                                    num_height_points=8))
+from clothsim.sim.solvers.substep import integrate_substeps
+start, integrator = float(sys.argv[1]), sys.argv[2]
+sim = Simulation(load_scene("pinned2").with_simulation(self_collision="off", integrator=integrator).with_cloth(
+    num_width_points=8, num_height_points=8))
 while time.time() < start:  # both processes reach the first frame at the same moment
     time.sleep(0.001)
 sim.step(1)
-s = _member.stats
+s = (_member if integrator == "verlet" else integrate_substeps).stats
 print(sum(s.cache_hits.values()), sum(s.cache_misses.values()))
 """
 
 
-def test_processes_starting_one_plan_at_once_compile_it_once(tmp_path: Path) -> None:
+@pytest.mark.parametrize("integrator", ["verlet", "symplectic_euler"])
+def test_processes_starting_one_plan_at_once_compile_it_once(tmp_path: Path, integrator: str) -> None:
     # Two processes reach the first frame of the same plan at the same moment on a cold cache (the
-    # suite's workers, a sweep's local workers): one compiles the member kernel, the other waits
-    # for it and loads it from the cache.
+    # suite's workers, a sweep's local workers): one compiles the plan's kernel (the team's member,
+    # or another integrator's substep), the other waits for it and loads it from the cache.
     import time
 
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env.update(NUMBA_CACHE_DIR=str(tmp_path / "cache"), CLOTHSIM_COMPILE_JOBS="1")
     start = time.time() + 4.0  # after both have imported and built their scene
-    procs = [subprocess.Popen([sys.executable, "-c", _SAME_PLAN_PROBE, str(start)], env=env, cwd=tmp_path,
+    procs = [subprocess.Popen([sys.executable, "-c", _SAME_PLAN_PROBE, str(start), integrator], env=env, cwd=tmp_path,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
     counts = []
     for p in procs:
         out, err = p.communicate(timeout=240)
         assert p.returncode == 0, err
         counts.append(tuple(int(x) for x in out.split()))
-    # (cache hits, cache misses) of the member kernel in each process
+    # (cache hits, cache misses) of that kernel in each process
     assert sorted(counts) == [(0, 1), (1, 0)], counts
 
 

@@ -1,6 +1,7 @@
 """A cold start on two cores: compile one kernel in a second process while this one compiles the
 rest (:func:`compile_elsewhere`), and the small kernels every run meets after its first frame
-(:func:`warm_side_kernels`), which the layers above register here (:func:`on_warm`).
+(:func:`warm_side_kernels`), which the layers above register here (:func:`on_warm`); and one
+compile of a plan for all the processes that start it at once (:func:`compiling_alone`).
 
 Kernels are compiled for this CPU the first time a scene needs them and cached on disk (next to
 the installed package, or in Numba's user-wide cache when that folder is read-only). A warm
@@ -113,7 +114,10 @@ def compiling_alone(dispatcher: Any, argtypes: tuple) -> Iterator[None]:
         yield
         return
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:  # a file system without locks (some network mounts): compile unlocked
+            pass
         yield
     finally:
         os.close(fd)  # releases the lock

@@ -81,6 +81,8 @@ class IntegratorState:
         self.inv_mass = self.mask / sim.mass
         self.scratch = np.zeros((7, 3, n))
         self.cg_iterations = 0
+        #: the plan whose first call took the compile lock (see _advance)
+        self.compiled_for: Any = None
         self.bind_springs(sim)
 
     def bind_springs(self, sim: Any) -> None:
@@ -172,7 +174,15 @@ def _advance(sim: Any, steps: int) -> None:
         raise ValueError(f"unknown integrator {name!r}")
     step = Step(cloth.pos, cloth.last, st.vel, cloth.forces, sim.free, cloth.blocks, cloth.rest, sim.nw, sim.mass,
                 cloth.gravity, dt, f, phi, fix)
-    skipped, iterations = integrate_substeps(steps, step, stream, post, plan.forces, plan.pins, verlet,
-                                             symplectic, implicit, xpbd)
+    args = (steps, step, stream, post, plan.forces, plan.pins, verlet, symplectic, implicit, xpbd)
+    if st.compiled_for is not plan:
+        # the plan's first call: compiled by one process at a time (see jit.compile.compiling_alone)
+        from ...jit.compile import compiling_alone
+
+        with compiling_alone(integrate_substeps, tuple(numba.typeof(a) for a in args)):
+            skipped, iterations = integrate_substeps(*args)
+        st.compiled_for = plan
+    else:
+        skipped, iterations = integrate_substeps(*args)
     sim.colliders_skipped += skipped
     st.cg_iterations += iterations
