@@ -99,11 +99,12 @@ def compiling_alone(dispatcher: Any, argtypes: tuple) -> Iterator[None]:
     The body compiles the kernel (and what goes with it) into the cache. Processes that start
     the same plan at once on a cold cache (the test suite's workers, a sweep's local workers)
     otherwise all compiled it, each on its own core; now the first compiles and the others wait,
-    then load it. A kernel cached already, or a cache folder where no lock file can be made, takes
-    no lock. The lock goes with its process (a killed process leaves nothing held).
+    then load it. Uncontended, the lock costs a file open (cheaper than asking the cache whether
+    the kernel is there); a cache folder where no lock file can be made takes none. The lock goes
+    with its process (a killed process leaves nothing held).
     """
     folder = cache_folder(dispatcher)
-    if folder is None or is_cached(dispatcher, argtypes):
+    if folder is None:
         yield
         return
     func = dispatcher.py_func
