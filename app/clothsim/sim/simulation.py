@@ -11,9 +11,9 @@ from ..scene import Scene, check_field
 from ..validate import At, check, integer
 from ..wind import WINDS
 from . import team
-from .passes.colliders import plan_colliders
+from .passes.colliders import TEAM_CALLS, plan_colliders
 from .passes.colliders.plane import SURFACE_OFFSET
-from .solvers.frame import PASS_ALL, Addresses, kernel_addresses, run_substeps, with_mesh_address
+from .solvers.frame import CALLS, PASS_ALL, Addresses, kernel_addresses, run_substeps, with_mesh_address
 from .passes.forces import plan_forces
 from .passes.wind import triangles
 from ..jit import CHUNKS
@@ -286,7 +286,7 @@ class Simulation:
         dt = self.dt
         st = ClothState(self._pos, self._last, self._forces, self.pinned, self._pins, self._blocks, self._rest,
                         self.nw, offsets, k, spring_rest, buf, self.mass, self._gravity, dt * dt * (1.0 / self.mass),
-                        self._keep, self._stretch_limit, self._skips)
+                        self._keep, self._stretch_limit, self._skips, np.zeros(CALLS, np.int64))
         steps = sim.simulation_steps
         spec = grid = col = None
         if self._self_mode == MODE_SPEC:
@@ -303,7 +303,7 @@ class Simulation:
             margin = 0.0 if self._self_mode == 0 else 1.001 * (2.0 * cloth.thickness) / steps
             if contact is not None:
                 margin = 1.001 * response_reach(contact)
-            col = Colliders(self.free, SURFACE_OFFSET, self._box, self._boxes, margin)
+            col = Colliders(self.free, SURFACE_OFFSET, self._box, self._boxes, margin, np.zeros(TEAM_CALLS, np.int64))
         return Plan(st, spec, grid, col, self._colliders, plan_forces(self), self._pin_group(), contact)
 
     def _contact_group(self) -> tuple | None:
@@ -401,8 +401,11 @@ class Simulation:
         if self._kernels is None:
             self._kernels = kernel_addresses(self._kernel_args, self._sync)
             plan = self._kernel_args
+            plan.st.calls[:] = self._kernels.calls
             if plan.spec is not None:
                 plan = plan._replace(spec=plan.spec._replace(repel=self._kernels.repel))
+            if plan.col is not None:
+                plan.col.calls[:] = self._kernels.colliders
             self._kernel_args = with_mesh_address(plan, self._kernels.collide)
         k = self._kernels
         self.colliders_skipped += run_substeps(steps, self._kernel_args, self._sync, size, passes, k.member, k.enter,

@@ -37,6 +37,9 @@ class ClothState(NamedTuple):
     keep: float
     stretch_limit: float
     skips: np.ndarray
+    #: addresses of the passes every plan runs, compiled once for every plan (see
+    #: :func:`clothsim.sim.solvers.frame.kernel_addresses`); zeros until known
+    calls: np.ndarray
 
 
 class SpecHash(NamedTuple):
@@ -87,6 +90,10 @@ class Colliders(NamedTuple):
     box: np.ndarray
     boxes: np.ndarray
     self_margin: float
+    #: addresses of the kinds' pose, reach and collide passes for the plan's kinds
+    #: (:data:`clothsim.sim.passes.colliders.TEAM_CALLS`), which the thread team's members call
+    #: (see :func:`clothsim.sim.solvers.frame.kernel_addresses`); zeros until known
+    calls: np.ndarray
 
 
 class PinMotion(NamedTuple):

@@ -92,6 +92,22 @@ def provot_cut(pos: np.ndarray, pinned: np.ndarray, blocks: np.ndarray, rest: np
             _provot_row(pos, pinned, blocks, rest, nw, limit, g, r)
 
 
+@njit(**KERNEL)
+def provot_bands_of(pos: np.ndarray, pinned: np.ndarray, blocks: np.ndarray, rest: np.ndarray, nw: int,
+                    limit: float, lo: int, hi: int, bands: int) -> None:
+    """Bands ``lo`` to ``hi`` of :func:`provot`'s first phase, compiled on its own, for a call by address."""
+    for b in range(lo, hi):
+        provot_band(pos, pinned, blocks, rest, nw, limit, b, bands)
+
+
+@njit(**KERNEL)
+def provot_cuts_of(pos: np.ndarray, pinned: np.ndarray, blocks: np.ndarray, rest: np.ndarray, nw: int,
+                   limit: float, lo: int, hi: int, bands: int) -> None:
+    """Cuts ``lo`` to ``hi`` of :func:`provot`'s second phase, compiled on its own, for a call by address."""
+    for b in range(lo, hi):
+        provot_cut(pos, pinned, blocks, rest, nw, limit, b, bands)
+
+
 @njit(**PARALLEL)
 def provot(pos: np.ndarray, pinned: np.ndarray, blocks: np.ndarray, rest: np.ndarray, nw: int,
            limit: float) -> None:

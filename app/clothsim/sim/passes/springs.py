@@ -59,6 +59,15 @@ def spring_job(pos: np.ndarray, offsets: np.ndarray, k: np.ndarray, rest: np.nda
         oz[t] = f * ez
 
 
+@njit(**KERNEL)
+def spring_jobs(pos: np.ndarray, offsets: np.ndarray, k: np.ndarray, rest: np.ndarray, buf: np.ndarray,
+                lo: int, hi: int) -> None:
+    """Work items ``lo`` to ``hi`` of :func:`spring_pass`, compiled on its own: the thread team's
+    member calls it by address (:mod:`clothsim.sim.solvers.frame`)."""
+    for job in range(lo, hi):
+        spring_job(pos, offsets, k, rest, buf, job)
+
+
 @njit(**PARALLEL)
 def spring_pass(pos: np.ndarray, offsets: np.ndarray, k: np.ndarray, rest: np.ndarray, buf: np.ndarray) -> None:
     """buf[g, :, a + offset[g]] = k * (|d| - rest) * d / |d| with d = pos[b] - pos[a], b = a + offset[g]."""
@@ -82,6 +91,13 @@ def gather_chunk(offsets: np.ndarray, buf: np.ndarray, mass: float, gravity: np.
             pushed = buf[g, ax, lo:hi]
             for t in range(hi - lo):
                 f[t] += pulled[t] - pushed[t]
+
+
+@njit(**KERNEL)
+def gather_one(offsets: np.ndarray, buf: np.ndarray, mass: float, gravity: np.ndarray, forces: np.ndarray,
+               c: int) -> None:
+    """:func:`gather_chunk` compiled on its own, for a call by address."""
+    gather_chunk(offsets, buf, mass, gravity, forces, c)
 
 
 @njit(**PARALLEL)

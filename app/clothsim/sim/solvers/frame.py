@@ -15,9 +15,13 @@ passes, and a new feature adds a field or a group, not a dozen positional argume
 
 Colliders come as one tuple of the groups of the kinds the scene has
 (:mod:`clothsim.sim.passes.colliders`): member 0 poses the moving ones, every member tests which
-the cloth's bounding box reaches and collides its own work items. The mesh kind's pass is called
-by address, like the spec hash's query, so that it compiles beside the member (in
-:func:`kernel_addresses`) and is not re-optimised inside it.
+the cloth's bounding box reaches and collides its own work items.
+
+The passes every plan runs (springs, gather, Verlet, Provot's two phases: ``ClothState.calls``)
+and the collider passes of the plan's kinds (``Colliders.calls``) are kernels of their own that
+the member calls by address, like the spec hash's query and the mesh pass: each is compiled once
+for every plan that has it, and none is linked into the member and re-optimised there, so a plan
+compiles little more than its own loop (docs/performance.md, "Passes called by address").
 
 Three kernels start a frame: :func:`run_substeps` (compiled per plan, small) copies the plan to
 its stack and calls the team's parallel loop, :func:`_launch`, with that copy's address; the loop
@@ -40,11 +44,12 @@ from ...jit import CHUNKS, KERNEL, PARALLEL
 from ...jit.internals import call_native, load_value, native_address, stack_address, type_ref
 
 from ..passes.forces import force_gather, force_work
-from ..passes.colliders import any_moving, collide_colliders, member_flags, pose_colliders, reach_colliders
+from ..passes.colliders import (COLLIDE, POSE, REACH, TEAM_CALLS, any_moving, collide_range, member_flags, pose_all,
+                                reach_all)
 from ..passes.colliders.bounds import member_bounds, merge_bounds
-from ..passes.provot import provot_band, provot_bands, provot_cut
-from ..passes.springs import gather_chunk, spring_job
-from .verlet import verlet_chunk
+from ..passes.provot import provot_bands, provot_bands_of, provot_cuts_of
+from ..passes.springs import gather_one, spring_jobs
+from .verlet import verlet_one
 from ..clock import substep_time
 from ..passes.pins import offset_at, pin_chunk
 from ..passes.colliders.mesh import MeshGroup, collide_meshes_chunk, collide_types
@@ -58,6 +63,11 @@ from ..team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
 PASS_INTEGRATE, PASS_SELF, PASS_COLLIDERS, PASS_PROVOT, PASS_CONTACT = 1, 2, 4, 8, 16
 PASS_ALL = 31
 
+#: The passes every plan runs, in ``ClothState.calls``: compiled once for every plan and called
+#: by address, so that a plan compiles only its own passes and the member's loop.
+CALL_SPRINGS, CALL_GATHER, CALL_VERLET, CALL_BANDS, CALL_CUTS = range(5)
+CALLS = 5
+
 
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
@@ -70,7 +80,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
     """
     pos = st.pos
     last = st.last
-    spring_jobs = st.offsets.shape[0] * CHUNKS
+    jobs = st.offsets.shape[0] * CHUNKS
     bands = provot_bands(pos, st.nw)
     n = pos.shape[1]
     integrate = passes & PASS_INTEGRATE != 0
@@ -103,14 +113,15 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         # skipping stays exact.
         margin = 0.0 if not self_on else col.self_margin
         cols = np.empty((2, 64))
+        skipped = np.zeros(1, np.int64)
     if pins is not None:
         offset = np.empty(3)
     gen = np.int64(0)
     for substep in range(steps):
         if integrate:
-            lo, hi = share(spring_jobs, member, size)
-            for job in range(lo, hi):
-                spring_job(pos, st.offsets, st.k, st.spring_rest, st.buf, job)
+            lo, hi = share(jobs, member, size)
+            call_native(st.calls[CALL_SPRINGS], (pos, st.offsets, st.k, st.spring_rest, st.buf, np.int64(lo),
+                                                 np.int64(hi)))
             # the other forces read only positions: same phase as the springs
             w0, w1 = share(CHUNKS, member, size)
             force_work(forces, pos, last, substep, w0, w1)
@@ -125,9 +136,9 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 if self_on:
                     hist[member] = 0
             for c in range(lo, hi):
-                gather_chunk(st.offsets, st.buf, st.mass, st.gravity, st.forces, c)
+                call_native(st.calls[CALL_GATHER], (st.offsets, st.buf, st.mass, st.gravity, st.forces, np.int64(c)))
                 force_gather(forces, st.forces, c)
-                verlet_chunk(pos, last, st.forces, st.pins, st.h2, st.keep, c)
+                call_native(st.calls[CALL_VERLET], (pos, last, st.forces, st.pins, st.h2, st.keep, np.int64(c)))
                 if pins is not None:
                     pin_chunk(pos, last, pins, offset, c)
                 if spec is not None:
@@ -198,7 +209,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             if colliding:
                 if posing:
                     if member == 0:
-                        pose_colliders(colliders, substep)
+                        call_native(col.calls[POSE], (colliders, np.int64(substep)))
                     gen = barrier(sync, size, gen)
                     if gen < 0:
                         return
@@ -212,24 +223,24 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     if gen < 0:
                         return
                     merge_bounds(col.boxes, 0.0, box)
-                skipped = reach_colliders(colliders, box, ons, col.offset)
+                call_native(col.calls[REACH], (colliders, box, ons, col.offset, skipped))
                 if member == 0:
-                    st.skips[0] += skipped
-                for c in range(lo, hi):
-                    collide_colliders(colliders, pos, last, col.free, ons, col.offset, c)
+                    st.skips[0] += skipped[0]
+                call_native(col.calls[COLLIDE], (colliders, pos, last, col.free, ons, col.offset, np.int64(lo),
+                                                 np.int64(hi)))
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
         if provot_on:
             lo, hi = share(bands, member, size)
-            for b in range(lo, hi):
-                provot_band(pos, st.pinned, st.blocks, st.rest, st.nw, st.stretch_limit, b, bands)
+            call_native(st.calls[CALL_BANDS], (pos, st.pinned, st.blocks, st.rest, st.nw, st.stretch_limit,
+                                               np.int64(lo), np.int64(hi), np.int64(bands)))
             gen = barrier(sync, size, gen)
             if gen < 0:
                 return
             lo, hi = share(bands - 1, member, size)
-            for b in range(lo, hi):
-                provot_cut(pos, st.pinned, st.blocks, st.rest, st.nw, st.stretch_limit, b, bands)
+            call_native(st.calls[CALL_CUTS], (pos, st.pinned, st.blocks, st.rest, st.nw, st.stretch_limit,
+                                              np.int64(lo), np.int64(hi), np.int64(bands)))
             gen = barrier(sync, size, gen)
             if gen < 0:
                 return
@@ -270,6 +281,17 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         # the mesh pass too: compiled here meanwhile, and kept out of the member's module
         collide = collide_types(st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
                                 col.types[col.fields.index("free")], meshes[0])
+    team_calls = None
+    if col != types.none:
+        # the kinds' passes: compiled here meanwhile, shared by the plans of the same kinds
+        cols = groups.colliders
+        ons = types.Tuple([g.types[g.fields.index("on")] for g in cols.types])
+        offset = col.types[col.fields.index("offset")]
+        box = col.types[col.fields.index("box")]
+        team_calls = {POSE: (pose_all, (cols, i64)),
+                      REACH: (reach_all, (cols, box, ons, offset, types.Array(i64, 1, "C"))),
+                      COLLIDE: (collide_range, (cols, st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
+                                                col.types[col.fields.index("free")], ons, offset, i64, i64))}
     enter = (i64, i64, i64, i64, i64, sync, i64, types.TypeRef(plan_type))
     launch = (i64, i64, i64, i64, sync, i64, i64)
 
@@ -278,18 +300,42 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
             repel_slots.compile(repel)
         if collide is not None:
             collide_meshes_chunk.compile(collide)
+        for kernel, kinds in (team_calls or {}).values():
+            kernel.compile(kinds)
         _enter.compile(enter)
         _launch.compile(launch)
         run_substeps.compile((i64, plan_type, sync, i64, i64, i64, i64, i64))
         warm_side_kernels()
 
+    calls = _call_addresses(st)
     with compiling_alone(_member, argtypes):
         compile_elsewhere(_member, argtypes, meanwhile)
         # (compiled here, on one core or when the second process failed)
         return Addresses(native_address(_member, argtypes),
                          0 if repel is None else native_address(repel_slots, repel),
                          0 if collide is None else native_address(collide_meshes_chunk, collide),
-                         native_address(_enter, enter), native_address(_launch, launch))
+                         native_address(_enter, enter), native_address(_launch, launch), calls,
+                         tuple(native_address(*team_calls[i]) for i in range(TEAM_CALLS)) if team_calls else ())
+
+
+@lru_cache(maxsize=None)
+def _call_addresses(st: types.Type) -> tuple[int, ...]:
+    """The ``CALL_*`` passes compiled (or loaded) for the cloth group's type ``st``."""
+    def field(name: str) -> types.Type:
+        return st.types[st.fields.index(name)]
+
+    i64 = types.int64
+    pos = field("pos")
+    rows = (pos, field("pinned"), field("blocks"), field("rest"), field("nw"), field("stretch_limit"), i64, i64, i64)
+    kernels = {CALL_SPRINGS: (spring_jobs, (pos, field("offsets"), field("k"), field("spring_rest"), field("buf"),
+                                            i64, i64)),
+               CALL_GATHER: (gather_one, (field("offsets"), field("buf"), field("mass"), field("gravity"),
+                                          field("forces"), i64)),
+               CALL_VERLET: (verlet_one, (pos, field("last"), field("forces"), field("pins"), field("h2"),
+                                          field("keep"), i64)),
+               CALL_BANDS: (provot_bands_of, rows),
+               CALL_CUTS: (provot_cuts_of, rows)}
+    return tuple(native_address(*kernels[i]) for i in range(CALLS))
 
 
 class Addresses(NamedTuple):
@@ -305,6 +351,10 @@ class Addresses(NamedTuple):
     enter: int
     #: :func:`_launch` (one for every plan)
     launch: int
+    #: the passes every plan runs (``ClothState.calls``, ``CALL_*``), one for every plan
+    calls: tuple[int, ...]
+    #: the collider passes for the plan's kinds (``Colliders.calls``, :data:`~clothsim.sim.passes.colliders.TEAM_CALLS`; empty without colliders)
+    colliders: tuple[int, ...]
 
 
 def kernel_addresses(plan: Plan, sync: np.ndarray) -> Addresses:

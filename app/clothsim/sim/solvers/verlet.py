@@ -47,6 +47,13 @@ def verlet_chunk(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, pins: np
 
 
 @njit(**KERNEL)
+def verlet_one(pos: np.ndarray, last: np.ndarray, forces: np.ndarray, pins: np.ndarray, h2: float, keep: float,
+               c: int) -> None:
+    """:func:`verlet_chunk` compiled on its own, for a call by address."""
+    verlet_chunk(pos, last, forces, pins, h2, keep, c)
+
+
+@njit(**KERNEL)
 def verlet_start(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray, free: np.ndarray,
                  inv_mass: float, dt: float, c: float) -> None:
     """Second-order start: last = x0 - v0*dt + a0*dt^2/2 with a0 = F/m - c*v0 (free points)."""

@@ -157,6 +157,34 @@ def _any_moving(cols):  # noqa: ANN001, ANN202
     return lambda cols: moving
 
 
+#: The thread team's collider passes, compiled on their own for a plan's kinds and called by
+#: address (``Colliders.calls``): plans of the same kinds share them, and a plan compiles only
+#: its own passes.
+POSE, REACH, COLLIDE = range(3)
+TEAM_CALLS = 3
+
+
+@njit(**KERNEL)
+def pose_all(cols: tuple, substep: int) -> None:
+    """:func:`pose_colliders`, compiled on its own for a call by address."""
+    pose_colliders(cols, substep)
+
+
+@njit(**KERNEL)
+def reach_all(cols: tuple, box: np.ndarray, ons: tuple, offset: float, skipped: np.ndarray) -> None:
+    """:func:`reach_colliders`, compiled on its own for a call by address; the colliders ruled out
+    go to ``skipped[0]``."""
+    skipped[0] = reach_colliders(cols, box, ons, offset)
+
+
+@njit(**KERNEL)
+def collide_range(cols: tuple, pos: np.ndarray, last: np.ndarray, free: np.ndarray, ons: tuple, offset: float,
+                  lo: int, hi: int) -> None:
+    """Work items ``lo`` to ``hi`` of :func:`collide_colliders`, compiled on its own for a call by address."""
+    for c in range(lo, hi):
+        collide_colliders(cols, pos, last, free, ons, offset, c)
+
+
 @njit(inline="always", **KERNEL)
 def _collide_chunk(pos: np.ndarray, last: np.ndarray, col: tuple, at: int, cols_type: Any, c: int) -> None:
     cols = load_value(at, cols_type)
