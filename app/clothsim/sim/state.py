@@ -37,8 +37,8 @@ class ClothState(NamedTuple):
     keep: float
     stretch_limit: float
     skips: np.ndarray
-    #: addresses of the passes every plan runs, compiled once for every plan (see
-    #: :func:`clothsim.sim.solvers.frame.kernel_addresses`); zeros until known
+    #: addresses of the passes the thread team's member calls by address (``CALL_*`` of
+    #: :mod:`clothsim.sim.solvers.frame`, filled in by its ``kernel_addresses``); zeros until known
     calls: np.ndarray
 
 
@@ -125,6 +125,9 @@ class Corrections(NamedTuple):
     colliders: tuple
     #: the contact mode's group (:class:`clothsim.sim.passes.contact.Contact`), run after Provot; None otherwise
     contact: tuple | None = None
+    #: address of :func:`~clothsim.sim.passes.corrections.corrections_into` for this group's
+    #: type, which the integrators' substep calls; 0 until known
+    at: int = 0
 
 
 class Plan(NamedTuple):

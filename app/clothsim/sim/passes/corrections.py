@@ -42,6 +42,15 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
 
 
 @njit(**EXACT)
+def corrections_into(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.ndarray, rest: np.ndarray,
+                     nw: int, post: tuple, substep: int, skipped: np.ndarray) -> None:
+    """:func:`corrections`, compiled on its own for a call by address (``Corrections.at``): the
+    integrators' substeps share it, and none links it in and re-optimises it; the colliders
+    skipped go to ``skipped[0]``."""
+    skipped[0] = corrections(pos, last, free, blocks, rest, nw, post, substep)
+
+
+@njit(**EXACT)
 def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, colliders: tuple, substep: int) -> int:
     """The collider pass when the scene has colliders (``col`` is not None); returns those skipped."""
     if col is None:

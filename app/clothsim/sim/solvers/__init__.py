@@ -27,7 +27,7 @@ import numba
 import numpy as np
 
 from ..passes.springs import accumulate_forces
-from ..passes.corrections import has_corrections
+from ..passes.corrections import corrections_into, has_corrections
 from ..state import Corrections
 from .implicit import CG_MAX_ITERATIONS, CG_TOLERANCE, Implicit
 from .substep import Step, integrate_substeps
@@ -83,6 +83,8 @@ class IntegratorState:
         self.cg_iterations = 0
         #: the plan whose first call took the compile lock (see _advance)
         self.compiled_for: Any = None
+        #: ``Corrections.at`` for the plan it was compiled for
+        self.post_at = 0
         self.bind_springs(sim)
 
     def bind_springs(self, sim: Any) -> None:
@@ -116,6 +118,22 @@ def post_args(sim: Any) -> Corrections:
     mode = 0 if plan.contact is not None else sim.self_mode
     return Corrections(sim.pinned, mode, sim.self_hash(), plan.st.stretch_limit, plan.col, plan.colliders,
                        plan.contact)
+
+
+def corrections_address(step: Step, post: Corrections) -> int:
+    """``Corrections.at``: the address of :func:`~clothsim.sim.passes.corrections.corrections_into`
+    compiled (or loaded) for ``step``'s arrays and ``post``'s type."""
+    from ...jit.internals import native_address
+
+    i64 = numba.types.int64
+    argtypes = (*(numba.typeof(x) for x in (step.pos, step.last, step.free, step.blocks, step.rest)), i64,
+                numba.typeof(post), i64, numba.types.Array(i64, 1, "C"))
+    return native_address(corrections_into, argtypes)
+
+
+def _bound(args: tuple, st: IntegratorState) -> tuple:
+    """``integrate_substeps``' arguments with the addresses of the kernels it calls filled in."""
+    return (*args[:3], args[3]._replace(at=st.post_at), *args[4:])
 
 
 def state_of(sim: Any) -> IntegratorState:
@@ -180,9 +198,10 @@ def _advance(sim: Any, steps: int) -> None:
         from ...jit.compile import compiling_alone
 
         with compiling_alone(integrate_substeps, tuple(numba.typeof(a) for a in args)):
-            skipped, iterations = integrate_substeps(*args)
+            st.post_at = corrections_address(step, post)
+            skipped, iterations = integrate_substeps(*_bound(args, st))
         st.compiled_for = plan
     else:
-        skipped, iterations = integrate_substeps(*args)
+        skipped, iterations = integrate_substeps(*_bound(args, st))
     sim.colliders_skipped += skipped
     st.cg_iterations += iterations

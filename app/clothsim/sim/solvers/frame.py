@@ -17,11 +17,12 @@ Colliders come as one tuple of the groups of the kinds the scene has
 (:mod:`clothsim.sim.passes.colliders`): member 0 poses the moving ones, every member tests which
 the cloth's bounding box reaches and collides its own work items.
 
-The passes every plan runs (springs, gather, Verlet, Provot's two phases: ``ClothState.calls``)
-and the collider passes of the plan's kinds (``Colliders.calls``) are kernels of their own that
-the member calls by address, like the spec hash's query and the mesh pass: each is compiled once
-for every plan that has it, and none is linked into the member and re-optimised there, so a plan
-compiles little more than its own loop (docs/performance.md, "Passes called by address").
+The passes every plan runs (springs, gather, Verlet, Provot's two phases) and the contact mode's two
+(``ClothState.calls``), and the collider passes of the plan's kinds (``Colliders.calls``) are
+kernels of their own that the member calls by address, like the spec hash's query and the mesh pass:
+each is compiled once for every plan that has it, and none is linked into the member and re-
+optimised there, so a plan compiles little more than its own loop (docs/performance.md, "Passes
+called by address").
 
 Three kernels start a frame: :func:`run_substeps` (compiled per plan, small) copies the plan to
 its stack and calls the team's parallel loop, :func:`_launch`, with that copy's address; the loop
@@ -63,10 +64,11 @@ from ..team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
 PASS_INTEGRATE, PASS_SELF, PASS_COLLIDERS, PASS_PROVOT, PASS_CONTACT = 1, 2, 4, 8, 16
 PASS_ALL = 31
 
-#: The passes every plan runs, in ``ClothState.calls``: compiled once for every plan and called
-#: by address, so that a plan compiles only its own passes and the member's loop.
-CALL_SPRINGS, CALL_GATHER, CALL_VERLET, CALL_BANDS, CALL_CUTS = range(5)
-CALLS = 5
+#: The passes the member calls by address, in ``ClothState.calls``: those every plan runs, then
+#: the contact mode's two (0 without it). Each is compiled once for every plan that has it, so
+#: that a plan compiles only its own loop.
+CALL_SPRINGS, CALL_GATHER, CALL_VERLET, CALL_BANDS, CALL_CUTS, CALL_RESPOND, CALL_BOUND = range(7)
+CALLS = 7
 
 
 @njit(**KERNEL)
@@ -201,7 +203,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             if self_on:
                 # the contact response, where the hash's self-collision would be
                 if member == 0:
-                    contact_respond(pos, last, contact)
+                    call_native(st.calls[CALL_RESPOND], (pos, last, contact))
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
@@ -248,7 +250,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             # last in the substep: no later pass may move a point past the bound
             if passes & PASS_CONTACT != 0:
                 if member == 0:
-                    contact_bound(pos, contact)
+                    call_native(st.calls[CALL_BOUND], (pos, contact))
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
@@ -308,6 +310,10 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         warm_side_kernels()
 
     calls = _call_addresses(st)
+    if groups.contact != types.none:
+        pos, last = st.types[st.fields.index("pos")], st.types[st.fields.index("last")]
+        calls = (*calls[:CALL_RESPOND], native_address(contact_respond, (pos, last, groups.contact)),
+                 native_address(contact_bound, (pos, groups.contact)))
     with compiling_alone(_member, argtypes):
         compile_elsewhere(_member, argtypes, meanwhile)
         # (compiled here, on one core or when the second process failed)
@@ -320,7 +326,8 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
 
 @lru_cache(maxsize=None)
 def _call_addresses(st: types.Type) -> tuple[int, ...]:
-    """The ``CALL_*`` passes compiled (or loaded) for the cloth group's type ``st``."""
+    """The ``CALL_*`` passes every plan runs compiled (or loaded) for the cloth group's type ``st``
+    (the contact mode's two are 0)."""
     def field(name: str) -> types.Type:
         return st.types[st.fields.index(name)]
 
@@ -335,7 +342,7 @@ def _call_addresses(st: types.Type) -> tuple[int, ...]:
                                           field("keep"), i64)),
                CALL_BANDS: (provot_bands_of, rows),
                CALL_CUTS: (provot_cuts_of, rows)}
-    return tuple(native_address(*kernels[i]) for i in range(CALLS))
+    return tuple(native_address(*kernels[i]) for i in range(CALL_RESPOND)) + (0, 0)
 
 
 class Addresses(NamedTuple):
@@ -351,7 +358,7 @@ class Addresses(NamedTuple):
     enter: int
     #: :func:`_launch` (one for every plan)
     launch: int
-    #: the passes every plan runs (``ClothState.calls``, ``CALL_*``), one for every plan
+    #: the passes called by address (``ClothState.calls``, ``CALL_*``)
     calls: tuple[int, ...]
     #: the collider passes for the plan's kinds (``Colliders.calls``, :data:`~clothsim.sim.passes.colliders.TEAM_CALLS`; empty without colliders)
     colliders: tuple[int, ...]

@@ -22,7 +22,7 @@ from numba import njit
 from ...jit import EXACT, KERNEL
 from ..passes.forces import add_forces
 from ..passes.springs import accumulate_forces
-from ..passes.corrections import corrections
+from ...jit.internals import call_native
 from ..clock import substep_time
 from ..passes.pins import move_pins, pin_velocities
 from .implicit import Implicit, implicit_update
@@ -72,7 +72,8 @@ def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, forces: 
                        verlet: VerletRate | None, symplectic: Symplectic | None, implicit: Implicit | None,
                        xpbd: Xpbd | None) -> tuple[int, int]:
     """``steps`` substeps with the one integrator whose group is given; returns (colliders
-    skipped, CG iterations). ``post`` is the :class:`~clothsim.sim.state.Corrections` group,
+    skipped, CG iterations). ``post`` is the :class:`~clothsim.sim.state.Corrections` group
+    (with its ``at`` filled in: :func:`~clothsim.sim.solvers.corrections_address`),
     ``forces`` the groups of :mod:`clothsim.sim.passes.forces` the scene uses, ``pins`` the
     :class:`~clothsim.sim.state.PinMotion` group or None."""
     pos = s.pos
@@ -80,6 +81,7 @@ def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, forces: 
     skipped = 0
     iterations = 0
     offset = np.empty(3)
+    out = np.zeros(1, np.int64)
     for substep in range(steps):
         # forces: XPBD takes the springs as constraints, and only the other forces as forces. (Each test
         # names a group that is None for XPBD: Numba prunes a branch on an argument that is None,
@@ -115,7 +117,8 @@ def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, forces: 
         if xpbd is not None:
             solve_constraints(pos, xpbd.w, xpbd.si, xpbd.sj, s.rest, xpbd.kspr, xpbd.lam, s.dt, xpbd.iterations)
         # constraints and contacts
-        skipped += corrections(pos, last, s.free, s.blocks, s.rest, s.nw, post, substep)
+        call_native(post.at, (pos, last, s.free, s.blocks, s.rest, s.nw, post, np.int64(substep), out))
+        skipped += out[0]
         # velocities follow the corrected positions (Verlet's velocity is its positions already)
         if symplectic is not None:
             if s.fix_velocity:
