@@ -54,24 +54,23 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
     def step(scene) -> Callable[[], None]:  # noqa: ANN001
         return lambda: Simulation(scene).step(1)
 
-    items = [(f"frame kernel: self-collision {mode}, {'colliders' if col else 'no colliders'}",
-              step(_tiny_scene(mode, col))) for mode in ("spec", "off", "grid") for col in (False, True)]
-    items += [("frame kernel: self-collision spec, wind", step(_tiny_scene("spec", False, wind=True))),
-              ("frame kernel: self-collision spec, moving pins", step(_tiny_scene("spec", False, pin_motion=True)))]
-    items += [(f"integrator {name}", step(_tiny_scene("spec", True, name)))
-              for name in ("symplectic_euler", "implicit_euler", "xpbd")]
-    items.append(("verlet, rate damping", step(_tiny_scene("spec", True, "verlet", "rate"))))
-    # the bundled scenes with capsules, boxes and moving colliders (each kind present or absent,
-    # moving or not, is a plan of its own: these are the ones shipped)
     from ..scene import load_scene
 
-    items += [(f"frame kernel: bundled scene {name}", step(load_scene(name))) for name in ("capsule", "tablecloth",
-                                                                                          "curtain")]
-    # the contact mode's plan with the course's colliders, and the crossing counter it starts with
-    items.append(("frame kernel: self-collision contact, colliders", step(_tiny_scene("contact", True))))
-    # the bundled mesh scene's plan (other mesh plans compile on first use)
-    items.append(("frame kernel: self-collision spec, colliders and meshes", step(_tiny_scene("spec", True, meshes=True))))
-
+    # the longest first: with two or more processes the items are handed out in this order as
+    # processes free up, so a long item started last would keep one process busy alone
+    items = [("frame kernel: self-collision contact, colliders", step(_tiny_scene("contact", True))),
+             ("frame kernel: self-collision spec, colliders and meshes", step(_tiny_scene("spec", True, meshes=True))),
+             ("integrator symplectic_euler", step(_tiny_scene("spec", True, "symplectic_euler")))]
+    # the bundled scenes with capsules, boxes and moving colliders (each kind present or absent,
+    # moving or not, is a plan of its own: these are the ones shipped)
+    items += [(f"frame kernel: bundled scene {name}", step(load_scene(name))) for name in ("tablecloth", "curtain",
+                                                                                          "capsule")]
+    items += [(f"frame kernel: self-collision {mode}, {'colliders' if col else 'no colliders'}",
+               step(_tiny_scene(mode, col))) for mode in ("spec", "off", "grid") for col in (True, False)]
+    items += [("frame kernel: self-collision spec, wind", step(_tiny_scene("spec", False, wind=True))),
+              ("frame kernel: self-collision spec, moving pins", step(_tiny_scene("spec", False, pin_motion=True)))]
+    items += [(f"integrator {name}", step(_tiny_scene("spec", True, name))) for name in ("implicit_euler", "xpbd")]
+    items.append(("verlet, rate damping", step(_tiny_scene("spec", True, "verlet", "rate"))))
     items.append(("guard, rest detector, render mesh", side_kernels))
     return items
 
