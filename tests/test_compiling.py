@@ -94,7 +94,9 @@ def test_bench_compile_reports_each_kernel_of_a_cold_start() -> None:
     assert command.startswith("simulate: clothsim simulate pinned2 --frames 90")
     wall, compile_s = (float(x) for x in command.split()[-2:])
     assert 0 < compile_s < wall
-    assert "sim.solvers.frame._member [ClothState, SpecHash, -, -, -, -, -, -]" in out
+    # the passes every plan shares compile here while the plan's member compiles in a second
+    # process (its row is the wait for it, under the --min threshold when it finished first)
+    assert "sim.passes.springs.spring_jobs" in out
     assert "sim.solvers.frame.run_substeps" in out
 
 

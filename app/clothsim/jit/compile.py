@@ -27,7 +27,7 @@ __all__ = ["JOBS_VARIABLE", "available_cores", "compile_elsewhere", "compiling_a
 
 #: Set to 1 to compile everything in this process (no second process on a cold start).
 JOBS_VARIABLE = "CLOTHSIM_COMPILE_JOBS"
-_CHILD = ("import importlib, pickle, sys; module, name, argtypes = pickle.load(sys.stdin.buffer); "
+_CHILD = ("import importlib, pickle, sys\nfor module, name, argtypes in pickle.load(sys.stdin.buffer): "
           "getattr(importlib.import_module(module), name).compile(argtypes)")
 
 _WARMERS: dict[str, Callable[[], None]] = {}
@@ -54,9 +54,11 @@ def warm_side_kernels() -> None:
         _WARMERS[name]()
 
 
-def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], None]) -> None:
-    """Compile ``dispatcher`` for ``argtypes`` into the on-disk cache in a second process while
-    ``meanwhile()`` compiles the rest here; the caller then loads it from the cache.
+def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], None],
+                      also: tuple[tuple[Any, tuple], ...] = ()) -> None:
+    """Compile ``dispatcher`` for ``argtypes``, then each (dispatcher, argtypes) of ``also``, into
+    the on-disk cache in a second process while ``meanwhile()`` compiles the rest here; the caller
+    then loads them from the cache (``also`` is for sharing the work out evenly).
 
     Numba compiles one function at a time per process (a global lock), so a cold start on two
     cores otherwise leaves one idle. (A fork of this process, which skips the 0.7 s import, was
@@ -75,7 +77,8 @@ def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], 
     try:
         child = subprocess.Popen([sys.executable, "-c", _CHILD], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.DEVNULL)
-        child.stdin.write(pickle.dumps((func.__module__, func.__name__, argtypes)))
+        jobs = [(d.py_func.__module__, d.py_func.__name__, types) for d, types in ((dispatcher, argtypes), *also)]
+        child.stdin.write(pickle.dumps(jobs))
         child.stdin.close()
     except OSError:
         meanwhile()

@@ -297,26 +297,31 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
     enter = (i64, i64, i64, i64, i64, sync, i64, types.TypeRef(plan_type))
     launch = (i64, i64, i64, i64, sync, i64, i64)
 
+    contact = None
+    if groups.contact != types.none:
+        pos, last = st.types[st.fields.index("pos")], st.types[st.fields.index("last")]
+        contact = ((contact_respond, (pos, last, groups.contact)), (contact_bound, (pos, groups.contact)))
+
     def meanwhile() -> None:
+        _call_addresses(st)
+        for kernel, kinds in contact or ():
+            kernel.compile(kinds)
         if repel is not None:
             repel_slots.compile(repel)
         if collide is not None:
             collide_meshes_chunk.compile(collide)
-        for kernel, kinds in (team_calls or {}).values():
-            kernel.compile(kinds)
         _enter.compile(enter)
         _launch.compile(launch)
         run_substeps.compile((i64, plan_type, sync, i64, i64, i64, i64, i64))
         warm_side_kernels()
 
-    calls = _call_addresses(st)
-    if groups.contact != types.none:
-        pos, last = st.types[st.fields.index("pos")], st.types[st.fields.index("last")]
-        calls = (*calls[:CALL_RESPOND], native_address(contact_respond, (pos, last, groups.contact)),
-                 native_address(contact_bound, (pos, groups.contact)))
     with compiling_alone(_member, argtypes):
-        compile_elsewhere(_member, argtypes, meanwhile)
+        # the kinds' collider passes compile beside the member, the rest here
+        compile_elsewhere(_member, argtypes, meanwhile, tuple((team_calls or {}).values()))
         # (compiled here, on one core or when the second process failed)
+        calls = _call_addresses(st)
+        if contact is not None:
+            calls = (*calls[:CALL_RESPOND], *(native_address(*c) for c in contact))
         return Addresses(native_address(_member, argtypes),
                          0 if repel is None else native_address(repel_slots, repel),
                          0 if collide is None else native_address(collide_meshes_chunk, collide),
