@@ -73,7 +73,6 @@ def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], 
     if os.environ.get(JOBS_VARIABLE) == "1" or available_cores() < 2 or is_cached(dispatcher, argtypes):
         meanwhile()
         return
-    func = dispatcher.py_func
     try:
         child = subprocess.Popen([sys.executable, "-c", _CHILD], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.DEVNULL)

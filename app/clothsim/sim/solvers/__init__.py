@@ -122,18 +122,16 @@ def post_args(sim: Any) -> Corrections:
 
 def corrections_address(step: Step, post: Corrections) -> int:
     """``Corrections.at``: the address of :func:`~clothsim.sim.passes.corrections.corrections_into`
-    compiled (or loaded) for ``step``'s arrays and ``post``'s type."""
+    compiled (or loaded) for ``step``'s arrays and ``post``'s type, by one process at a time (see
+    :func:`clothsim.jit.compile.compiling_alone`)."""
+    from ...jit.compile import compiling_alone
     from ...jit.internals import native_address
 
     i64 = numba.types.int64
     argtypes = (*(numba.typeof(x) for x in (step.pos, step.last, step.free, step.blocks, step.rest)), i64,
                 numba.typeof(post), i64, numba.types.Array(i64, 1, "C"))
-    return native_address(corrections_into, argtypes)
-
-
-def _bound(args: tuple, st: IntegratorState) -> tuple:
-    """``integrate_substeps``' arguments with the addresses of the kernels it calls filled in."""
-    return (*args[:3], args[3]._replace(at=st.post_at), *args[4:])
+    with compiling_alone(corrections_into, argtypes):
+        return native_address(corrections_into, argtypes)
 
 
 def state_of(sim: Any) -> IntegratorState:
@@ -192,16 +190,18 @@ def _advance(sim: Any, steps: int) -> None:
         raise ValueError(f"unknown integrator {name!r}")
     step = Step(cloth.pos, cloth.last, st.vel, cloth.forces, sim.free, cloth.blocks, cloth.rest, sim.nw, sim.mass,
                 cloth.gravity, dt, f, phi, fix)
-    args = (steps, step, stream, post, plan.forces, plan.pins, verlet, symplectic, implicit, xpbd)
+    if st.compiled_for is not plan:
+        st.post_at = corrections_address(step, post)
+    args = (steps, step, stream, post._replace(at=st.post_at), plan.forces, plan.pins, verlet, symplectic, implicit,
+            xpbd)
     if st.compiled_for is not plan:
         # the plan's first call: compiled by one process at a time (see jit.compile.compiling_alone)
         from ...jit.compile import compiling_alone
 
         with compiling_alone(integrate_substeps, tuple(numba.typeof(a) for a in args)):
-            st.post_at = corrections_address(step, post)
-            skipped, iterations = integrate_substeps(*_bound(args, st))
+            skipped, iterations = integrate_substeps(*args)
         st.compiled_for = plan
     else:
-        skipped, iterations = integrate_substeps(*_bound(args, st))
+        skipped, iterations = integrate_substeps(*args)
     sim.colliders_skipped += skipped
     st.cg_iterations += iterations

@@ -285,7 +285,7 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
                                 col.types[col.fields.index("free")], meshes[0])
     team_calls = None
     if col != types.none:
-        # the kinds' passes: compiled here meanwhile, shared by the plans of the same kinds
+        # the kinds' passes, shared by the plans of the same kinds
         cols = groups.colliders
         ons = types.Tuple([g.types[g.fields.index("on")] for g in cols.types])
         offset = col.types[col.fields.index("offset")]
@@ -303,7 +303,7 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         contact = ((contact_respond, (pos, last, groups.contact)), (contact_bound, (pos, groups.contact)))
 
     def meanwhile() -> None:
-        _call_addresses(st)
+        _shared_addresses(st)
         for kernel, kinds in contact or ():
             kernel.compile(kinds)
         if repel is not None:
@@ -319,9 +319,7 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         # the kinds' collider passes compile beside the member, the rest here
         compile_elsewhere(_member, argtypes, meanwhile, tuple((team_calls or {}).values()))
         # (compiled here, on one core or when the second process failed)
-        calls = _call_addresses(st)
-        if contact is not None:
-            calls = (*calls[:CALL_RESPOND], *(native_address(*c) for c in contact))
+        calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0, 0)))
         return Addresses(native_address(_member, argtypes),
                          0 if repel is None else native_address(repel_slots, repel),
                          0 if collide is None else native_address(collide_meshes_chunk, collide),
@@ -330,24 +328,22 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
 
 
 @lru_cache(maxsize=None)
-def _call_addresses(st: types.Type) -> tuple[int, ...]:
-    """The ``CALL_*`` passes every plan runs compiled (or loaded) for the cloth group's type ``st``
-    (the contact mode's two are 0)."""
+def _shared_addresses(st: types.Type) -> tuple[int, ...]:
+    """The passes every plan runs (``CALL_SPRINGS`` to ``CALL_CUTS``) compiled (or loaded) for the
+    cloth group's type ``st``."""
     def field(name: str) -> types.Type:
         return st.types[st.fields.index(name)]
 
     i64 = types.int64
     pos = field("pos")
     rows = (pos, field("pinned"), field("blocks"), field("rest"), field("nw"), field("stretch_limit"), i64, i64, i64)
-    kernels = {CALL_SPRINGS: (spring_jobs, (pos, field("offsets"), field("k"), field("spring_rest"), field("buf"),
-                                            i64, i64)),
-               CALL_GATHER: (gather_one, (field("offsets"), field("buf"), field("mass"), field("gravity"),
-                                          field("forces"), i64)),
-               CALL_VERLET: (verlet_one, (pos, field("last"), field("forces"), field("pins"), field("h2"),
-                                          field("keep"), i64)),
-               CALL_BANDS: (provot_bands_of, rows),
-               CALL_CUTS: (provot_cuts_of, rows)}
-    return tuple(native_address(*kernels[i]) for i in range(CALL_RESPOND)) + (0, 0)
+    # in CALL_* order
+    kernels = ((spring_jobs, (pos, field("offsets"), field("k"), field("spring_rest"), field("buf"), i64, i64)),
+               (gather_one, (field("offsets"), field("buf"), field("mass"), field("gravity"), field("forces"), i64)),
+               (verlet_one, (pos, field("last"), field("forces"), field("pins"), field("h2"), field("keep"), i64)),
+               (provot_bands_of, rows),
+               (provot_cuts_of, rows))
+    return tuple(native_address(*k) for k in kernels)
 
 
 class Addresses(NamedTuple):
