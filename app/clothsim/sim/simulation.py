@@ -11,7 +11,7 @@ from ..scene import Scene, check_field
 from ..validate import At, check, integer
 from ..wind import WINDS
 from . import team
-from .passes.colliders import TEAM_CALLS, plan_colliders
+from .passes.colliders import KIND_CALLS, kind_addresses, plan_colliders
 from .passes.colliders.plane import SURFACE_OFFSET
 from .solvers.frame import CALLS, PASS_ALL, Addresses, kernel_addresses, run_substeps, with_mesh_address
 from .passes.forces import plan_forces
@@ -212,6 +212,8 @@ class Simulation:
             if isinstance(g, MeshGroup) and not g.collide:
                 self._kernel_args = plan = with_mesh_address(plan, collide_address(g, plan.st.pos, plan.st.last,
                                                                                    self.free))
+        if plan.col is not None and not plan.col.calls.all():
+            plan.col.calls[:] = kind_addresses(plan.colliders, plan.st.pos, plan.st.last, plan.col)
         return plan
 
     @property
@@ -303,7 +305,9 @@ class Simulation:
             margin = 0.0 if self._self_mode == 0 else 1.001 * (2.0 * cloth.thickness) / steps
             if contact is not None:
                 margin = 1.001 * response_reach(contact)
-            col = Colliders(self.free, SURFACE_OFFSET, self._box, self._boxes, margin, np.zeros(TEAM_CALLS, np.int64))
+            col = Colliders(self.free, SURFACE_OFFSET, self._box, self._boxes, margin,
+                            any(g.tracks is not None for g in self._colliders),
+                            np.zeros((len(self._colliders), KIND_CALLS), np.int64))
         return Plan(st, spec, grid, col, self._colliders, plan_forces(self), self._pin_group(), contact)
 
     def _contact_group(self) -> tuple | None:

@@ -90,9 +90,12 @@ class Colliders(NamedTuple):
     box: np.ndarray
     boxes: np.ndarray
     self_margin: float
-    #: addresses of the kinds' pose, reach and collide passes for the plan's kinds
-    #: (:data:`clothsim.sim.passes.colliders.TEAM_CALLS`), which the thread team's members call
-    #: (see :func:`clothsim.sim.solvers.frame.kernel_addresses`); zeros until known
+    #: whether any collider moves (the thread team then poses them, behind one more barrier)
+    moving: bool
+    #: (kinds, :data:`~clothsim.sim.passes.colliders.KIND_CALLS`) addresses of each kind's pose,
+    #: reach and collide passes, which every integrator's collider pass calls (filled by
+    #: :func:`clothsim.sim.solvers.frame.kernel_addresses` or
+    #: :func:`clothsim.sim.passes.colliders.kind_addresses`); zeros until known
     calls: np.ndarray
 
 

@@ -18,7 +18,7 @@ Colliders come as one tuple of the groups of the kinds the scene has
 the cloth's bounding box reaches and collides its own work items.
 
 The passes every plan runs (springs, gather, Verlet, Provot's two phases) and the contact mode's two
-(``ClothState.calls``), and the collider passes of the plan's kinds (``Colliders.calls``) are
+(``ClothState.calls``), and each collider kind's passes (``Colliders.calls``, a row per kind) are
 kernels of their own that the member calls by address, like the spec hash's query and the mesh pass:
 each is compiled once for every plan that has it, and none is linked into the member and re-
 optimised there, so a plan compiles little more than its own loop (docs/performance.md, "Passes
@@ -45,8 +45,7 @@ from ...jit import CHUNKS, KERNEL, PARALLEL
 from ...jit.internals import call_native, load_value, native_address, stack_address, type_ref
 
 from ..passes.forces import force_gather, force_work
-from ..passes.colliders import (COLLIDE, POSE, REACH, TEAM_CALLS, any_moving, collide_range, member_flags, pose_all,
-                                reach_all)
+from ..passes.colliders import kind_kernels, set_kernels
 from ..passes.colliders.bounds import member_bounds, merge_bounds
 from ..passes.provot import provot_bands, provot_bands_of, provot_cuts_of
 from ..passes.springs import gather_one, spring_jobs
@@ -65,15 +64,18 @@ PASS_INTEGRATE, PASS_SELF, PASS_COLLIDERS, PASS_PROVOT, PASS_CONTACT = 1, 2, 4, 
 PASS_ALL = 31
 
 #: The passes the member calls by address, in ``ClothState.calls``: those every plan runs, then
-#: the contact mode's two (0 without it). Each is compiled once for every plan that has it, so
-#: that a plan compiles only its own loop.
-CALL_SPRINGS, CALL_GATHER, CALL_VERLET, CALL_BANDS, CALL_CUTS, CALL_RESPOND, CALL_BOUND = range(7)
-CALLS = 7
+#: the contact mode's two (0 without it), then the colliders' (0 without them: see
+#: :func:`~clothsim.sim.passes.colliders.pose_set`). Each is compiled once for every plan that
+#: has it, so that a plan compiles only its own loop, and the member does not depend on which
+#: collider kinds a plan has.
+CALL_SPRINGS, CALL_GATHER, CALL_VERLET, CALL_BANDS, CALL_CUTS, CALL_RESPOND, CALL_BOUND, CALL_POSE_SET, \
+    CALL_COLLIDE_SET = range(9)
+CALLS = 9
 
 
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
-            col: tuple | None, colliders: tuple, forces: tuple, pins: tuple | None, contact: tuple | None,
+            col: tuple | None, colliders_at: int, forces: tuple, pins: tuple | None, contact: tuple | None,
             sync: np.ndarray, passes: int) -> None:
     """One member's part of ``steps`` substeps; members meet at a barrier between passes.
 
@@ -105,10 +107,10 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         box = col.box
         if member != 0:
             box = np.empty(6)
-        ons = member_flags(colliders, member != 0)
+        own = member != 0
         # Moving colliders: member 0 poses them at the start of the collider pass, behind one
         # more barrier (the pass reads the poses right after).
-        posing = any_moving(colliders)
+        posing = col.moving
         # The members' boxes are taken right after Verlet, before self-collision, which moves no
         # point by dist / sim_steps or more (an average of pushes each shorter than dist, over
         # sim_steps): widened by that, the box still bounds the cloth the colliders see, so
@@ -211,7 +213,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             if colliding:
                 if posing:
                     if member == 0:
-                        call_native(col.calls[POSE], (colliders, np.int64(substep)))
+                        call_native(st.calls[CALL_POSE_SET], (colliders_at, col.calls, np.int64(substep), type_ref(None)))
                     gen = barrier(sync, size, gen)
                     if gen < 0:
                         return
@@ -225,11 +227,10 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     if gen < 0:
                         return
                     merge_bounds(col.boxes, 0.0, box)
-                call_native(col.calls[REACH], (colliders, box, ons, col.offset, skipped))
+                call_native(st.calls[CALL_COLLIDE_SET], (colliders_at, col.calls, pos, last, col.free, box, col.offset,
+                                                         own, np.int64(lo), np.int64(hi), skipped, type_ref(None)))
                 if member == 0:
                     st.skips[0] += skipped[0]
-                call_native(col.calls[COLLIDE], (colliders, pos, last, col.free, ons, col.offset, np.int64(lo),
-                                                 np.int64(hi)))
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
@@ -283,17 +284,17 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         # the mesh pass too: compiled here meanwhile, and kept out of the member's module
         collide = collide_types(st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
                                 col.types[col.fields.index("free")], meshes[0])
-    team_calls = None
+    kinds: list[tuple[tuple, ...]] = []
+    sets: tuple[tuple, ...] = ()
     if col != types.none:
-        # the kinds' passes, shared by the plans of the same kinds
-        cols = groups.colliders
-        ons = types.Tuple([g.types[g.fields.index("on")] for g in cols.types])
-        offset = col.types[col.fields.index("offset")]
-        box = col.types[col.fields.index("box")]
-        team_calls = {POSE: (pose_all, (cols, i64)),
-                      REACH: (reach_all, (cols, box, ons, offset, types.Array(i64, 1, "C"))),
-                      COLLIDE: (collide_range, (cols, st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
-                                                col.types[col.fields.index("free")], ons, offset, i64, i64))}
+        # each kind's passes, shared by every plan with that kind's group, and the plan's set of
+        # kinds (small), which the member calls
+        state = (st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
+                 *(col.types[col.fields.index(name)] for name in ("free", "box", "offset")))
+        kinds = [kind_kernels(g, *state) for g in groups.colliders.types]
+        sets = set_kernels(groups.colliders, *state)
+    # the member takes the kinds' groups by address (see _enter): one member for every set of kinds
+    member = tuple(i64 if k == 3 + Plan._fields.index("colliders") else t for k, t in enumerate(argtypes))
     enter = (i64, i64, i64, i64, i64, sync, i64, types.TypeRef(plan_type))
     launch = (i64, i64, i64, i64, sync, i64, i64)
 
@@ -315,16 +316,17 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         run_substeps.compile((i64, plan_type, sync, i64, i64, i64, i64, i64))
         warm_side_kernels()
 
-    with compiling_alone(_member, argtypes):
+    with compiling_alone(_member, member):
         # the kinds' collider passes compile beside the member, the rest here
-        compile_elsewhere(_member, argtypes, meanwhile, tuple((team_calls or {}).values()))
+        compile_elsewhere(_member, member, meanwhile, (*(kernel for row in kinds for kernel in row), *sets))
         # (compiled here, on one core or when the second process failed)
-        calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0, 0)))
-        return Addresses(native_address(_member, argtypes),
+        calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0, 0)),
+                 *((native_address(*c) for c in sets) if sets else (0, 0)))
+        return Addresses(native_address(_member, member),
                          0 if repel is None else native_address(repel_slots, repel),
                          0 if collide is None else native_address(collide_meshes_chunk, collide),
                          native_address(_enter, enter), native_address(_launch, launch), calls,
-                         tuple(native_address(*team_calls[i]) for i in range(TEAM_CALLS)) if team_calls else ())
+                         tuple(tuple(native_address(*kernel) for kernel in row) for row in kinds))
 
 
 @lru_cache(maxsize=None)
@@ -361,8 +363,8 @@ class Addresses(NamedTuple):
     launch: int
     #: the passes called by address (``ClothState.calls``, ``CALL_*``)
     calls: tuple[int, ...]
-    #: the collider passes for the plan's kinds (``Colliders.calls``, :data:`~clothsim.sim.passes.colliders.TEAM_CALLS`; empty without colliders)
-    colliders: tuple[int, ...]
+    #: each kind's collider passes (``Colliders.calls``, a row per kind: :data:`~clothsim.sim.passes.colliders.KIND_CALLS`; empty without colliders)
+    colliders: tuple[tuple[int, ...], ...]
 
 
 def kernel_addresses(plan: Plan, sync: np.ndarray) -> Addresses:
@@ -380,8 +382,9 @@ def _enter(me: int, working: int, steps: int, plan_at: int, member: int, sync: n
     member, both compiled for the plan; the launcher calls it by address, as one signature for
     every plan."""
     plan = load_value(plan_at, plan_type)
-    if call_native(member, (me, working, steps, plan.st, plan.spec, plan.grid, plan.col, plan.colliders, plan.forces,
-                            plan.pins, plan.contact, sync, passes)) != 0:
+    # the collider kinds' groups by address: one compiled member for every set of kinds
+    if call_native(member, (me, working, steps, plan.st, plan.spec, plan.grid, plan.col, stack_address(plan.colliders),
+                            plan.forces, plan.pins, plan.contact, sync, passes)) != 0:
         sync[FAILED] = 1
         atomic_cas(sync, ABORT, 0, 1)
 

@@ -22,12 +22,12 @@ A collider kind is one module of this package (:mod:`.sphere` is the simplest) t
 
 Its line in :data:`clothsim.colliders.KINDS` (the scene's side: key, rule, JSON, and the name of
 this module) is all the simulator needs. A plan holds the groups of the kinds its scene has, as one
-tuple in registry order, and :func:`pose_colliders`, :func:`reach_colliders` and
-:func:`collide_colliders` are resolved at compile time, for that tuple's types, into direct calls of
-those kinds' functions: a scene compiles only its own kinds. Every point meets the kinds in
-registry order, the colliders of a kind in scene order. The thread team runs these same
-functions (member 0 poses, every member tests reach itself and collides its own work items); every
-other integrator calls :func:`collide_reachable`.
+tuple in registry order. Each kind's three functions are compiled on their own for its group's
+type (:func:`pose_kind`, :func:`reach_kind`, :func:`collide_kind`: a kind's code is compiled once
+whichever other kinds a plan has) and called by address (``Colliders.calls``, one row per kind:
+:func:`kind_addresses`): the thread team (member 0 poses, every member tests reach itself and
+collides its own work items) and every other integrator (:func:`collide_reachable`) make the same
+calls. Every point meets the kinds in registry order, the colliders of a kind in scene order.
 """
 
 from __future__ import annotations
@@ -37,12 +37,12 @@ from types import ModuleType
 from typing import Any
 
 import numpy as np
-from numba import njit, prange
+from numba import njit, prange, typeof, types
 from numba.extending import overload
 
 from ....colliders import KINDS
-from ....jit import CHUNKS, KERNEL, PARALLEL, field_is_none
-from ....jit.internals import load_value, stack_address, type_ref
+from ....jit import CHUNKS, KERNEL, PARALLEL
+from ....jit.internals import call_native, load_value, stack_address, type_ref
 from .bounds import cloth_bounds
 
 #: Every kind's pass module, in registry order (the order a point meets them).
@@ -90,11 +90,6 @@ def collide_colliders(cols: tuple, pos: np.ndarray, last: np.ndarray, free: np.n
 def member_flags(cols: tuple, own: bool) -> tuple:
     """The reach flags of every kind, as a tuple of arrays: the groups' own (``own`` False), or new
     ones (a team member other than the first, which tests reach for itself) (compiled code only)."""
-    raise NotImplementedError("compiled code only")
-
-
-def any_moving(cols: tuple) -> bool:
-    """True when some collider of ``cols`` moves: a constant of the compiled kernel (compiled code only)."""
     raise NotImplementedError("compiled code only")
 
 
@@ -151,44 +146,160 @@ def _member_flags(cols, own):  # noqa: ANN001, ANN202
     return impl
 
 
-@overload(any_moving, jit_options=KERNEL)
-def _any_moving(cols):  # noqa: ANN001, ANN202
-    moving = any(not field_is_none(t, "tracks") for t in cols.types)
-    return lambda cols: moving
-
-
-#: The thread team's collider passes, compiled on their own for a plan's kinds and called by
-#: address (``Colliders.calls``): plans of the same kinds share them, and a plan compiles only
-#: its own passes.
+#: Columns of ``Colliders.calls``, one row per kind of the plan: the kind's pose, reach and collide
+#: passes, each compiled on its own for the kind's group (:func:`pose_kind`, :func:`reach_kind`,
+#: :func:`collide_kind`) and called by address from every integrator's collider pass. A kind's
+#: code is then compiled once for each type of its group, whichever kinds it meets in a plan,
+#: and linked into no plan's kernel.
 POSE, REACH, COLLIDE = range(3)
-TEAM_CALLS = 3
+KIND_CALLS = 3
 
 
 @njit(**KERNEL)
-def pose_all(cols: tuple, substep: int) -> None:
-    """:func:`pose_colliders`, compiled on its own for a call by address."""
-    pose_colliders(cols, substep)
+def pose_kind(g: tuple, substep: int) -> None:
+    """One kind's moving colliders to their pose for substep ``substep`` (its ``pose``), compiled on
+    its own for a call by address."""
+    pose_colliders((g,), substep)
 
 
 @njit(**KERNEL)
-def reach_all(cols: tuple, box: np.ndarray, ons: tuple, offset: float, skipped: np.ndarray) -> None:
-    """:func:`reach_colliders`, compiled on its own for a call by address; the colliders ruled out
-    go to ``skipped[0]``."""
-    skipped[0] = reach_colliders(cols, box, ons, offset)
+def reach_kind(g: tuple, box: np.ndarray, on: np.ndarray, offset: float, skipped: np.ndarray) -> None:
+    """One kind's reach test (its ``reach``), compiled on its own for a call by address; the
+    colliders it ruled out go to ``skipped[0]``."""
+    skipped[0] = reach_colliders((g,), box, (on,), offset)
 
 
 @njit(**KERNEL)
-def collide_range(cols: tuple, pos: np.ndarray, last: np.ndarray, free: np.ndarray, ons: tuple, offset: float,
-                  lo: int, hi: int) -> None:
-    """Work items ``lo`` to ``hi`` of :func:`collide_colliders`, compiled on its own for a call by address."""
+def collide_kind(g: tuple, pos: np.ndarray, last: np.ndarray, free: np.ndarray, on: np.ndarray, offset: float,
+                 lo: int, hi: int) -> None:
+    """Work items ``lo`` to ``hi`` of one kind's collide pass (its ``collide``), compiled on its own
+    for a call by address."""
     for c in range(lo, hi):
-        collide_colliders(cols, pos, last, free, ons, offset, c)
+        collide_colliders((g,), pos, last, free, (on,), offset, c)
+
+
+def kind_kernels(group: types.Type, pos: types.Type, last: types.Type, free: types.Type, box: types.Type,
+                 offset: types.Type) -> tuple[tuple[Any, tuple], ...]:
+    """(kernel, argument types) of a kind's three passes (``POSE``, ``REACH``, ``COLLIDE`` order) for
+    its group's type and the state's types."""
+    i64 = types.int64
+    on = group.types[group.fields.index("on")]
+    return ((pose_kind, (group, i64)),
+            (reach_kind, (group, box, on, offset, types.Array(i64, 1, "C"))),
+            (collide_kind, (group, pos, last, free, on, offset, i64, i64)))
+
+
+def kind_addresses(cols: tuple, pos: np.ndarray, last: np.ndarray, col: Any) -> np.ndarray:
+    """``Colliders.calls`` for the groups ``cols`` and the state's arrays: each kind's passes
+    compiled (or loaded from the cache) by one process at a time."""
+    from ....jit.compile import compiling_alone
+    from ....jit.internals import native_address
+
+    state = tuple(typeof(x) for x in (pos, last, col.free, col.box, col.offset))
+    calls = np.zeros((len(cols), KIND_CALLS), np.int64)
+    for k, g in enumerate(cols):
+        kernels = kind_kernels(typeof(g), *state)
+        with compiling_alone(*kernels[COLLIDE]):
+            calls[k] = [native_address(*kernel) for kernel in kernels]
+    return calls
+
+
+def pose_by_address(cols: tuple, calls: np.ndarray, substep: int) -> None:
+    """:func:`pose_kind` of every kind of ``cols``, by the addresses in ``calls`` (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+def reach_by_address(cols: tuple, calls: np.ndarray, box: np.ndarray, ons: tuple, offset: float,
+                     skipped: np.ndarray) -> int:
+    """:func:`reach_kind` of every kind of ``cols`` by address, their flags into the matching array
+    of ``ons``; returns the colliders ruled out (``skipped`` is scratch) (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+def collide_by_address(cols: tuple, calls: np.ndarray, pos: np.ndarray, last: np.ndarray, free: np.ndarray,
+                       ons: tuple, offset: float, lo: int, hi: int) -> None:
+    """:func:`collide_kind` of every kind of ``cols`` by address, over work items ``lo`` to ``hi``
+    (a point meets the kinds in registry order; its correction depends on that point alone)
+    (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(pose_by_address, jit_options=KERNEL)
+def _pose_by_address(cols, calls, substep):  # noqa: ANN001, ANN202
+    if len(cols.types) == 0:
+        return lambda cols, calls, substep: None
+
+    def impl(cols, calls, substep):  # noqa: ANN001, ANN202
+        call_native(calls[0, POSE], (cols[0], substep))
+        pose_by_address(cols[1:], calls[1:], substep)
+
+    return impl
+
+
+@overload(reach_by_address, jit_options=KERNEL)
+def _reach_by_address(cols, calls, box, ons, offset, skipped):  # noqa: ANN001, ANN202
+    if len(cols.types) == 0:
+        return lambda cols, calls, box, ons, offset, skipped: 0
+
+    def impl(cols, calls, box, ons, offset, skipped):  # noqa: ANN001, ANN202
+        call_native(calls[0, REACH], (cols[0], box, ons[0], offset, skipped))
+        here = skipped[0]
+        return here + reach_by_address(cols[1:], calls[1:], box, ons[1:], offset, skipped)
+
+    return impl
+
+
+@overload(collide_by_address, jit_options=KERNEL)
+def _collide_by_address(cols, calls, pos, last, free, ons, offset, lo, hi):  # noqa: ANN001, ANN202
+    if len(cols.types) == 0:
+        return lambda cols, calls, pos, last, free, ons, offset, lo, hi: None
+
+    def impl(cols, calls, pos, last, free, ons, offset, lo, hi):  # noqa: ANN001, ANN202
+        call_native(calls[0, COLLIDE], (cols[0], pos, last, free, ons[0], offset, lo, hi))
+        collide_by_address(cols[1:], calls[1:], pos, last, free, ons[1:], offset, lo, hi)
+
+    return impl
+
+
+@njit(**KERNEL)
+def pose_set(at: int, calls: np.ndarray, substep: int, cols_type: Any) -> None:
+    """Every kind of a plan posed for substep ``substep``: the plan's groups read from the address
+    ``at`` (:func:`~clothsim.jit.internals.stack_address`, of type ``cols_type``), each kind's pose
+    called by its address in ``calls``. Compiled per set of kinds, and small: the thread team's
+    member calls it by address, so that the member is one kernel for every set of kinds."""
+    pose_by_address(load_value(at, cols_type), calls, substep)
+
+
+@njit(**KERNEL)
+def collide_set(at: int, calls: np.ndarray, pos: np.ndarray, last: np.ndarray, free: np.ndarray, box: np.ndarray,
+                offset: float, own: bool, lo: int, hi: int, skipped: np.ndarray, cols_type: Any) -> None:
+    """A team member's collider pass over work items ``lo`` to ``hi``: every kind's reach test
+    (into the groups' own flags, or new ones when ``own``; the colliders ruled out go to
+    ``skipped[0]``), then every kind's collide, each by its address in ``calls`` (see
+    :func:`pose_set`)."""
+    cols = load_value(at, cols_type)
+    ons = member_flags(cols, own)
+    skipped[0] = reach_by_address(cols, calls, box, ons, offset, skipped)
+    collide_by_address(cols, calls, pos, last, free, ons, offset, lo, hi)
+
+
+def set_kernels(cols: types.Type, pos: types.Type, last: types.Type, free: types.Type, box: types.Type,
+                offset: types.Type) -> tuple[tuple[Any, tuple], tuple[Any, tuple]]:
+    """(kernel, argument types) of :func:`pose_set` and :func:`collide_set` for a plan's tuple of
+    groups ``cols`` and the state's types."""
+    i64 = types.int64
+    calls = types.Array(i64, 2, "C")
+    ref = types.TypeRef(cols)
+    return ((pose_set, (i64, calls, i64, ref)),
+            (collide_set, (i64, calls, pos, last, free, box, offset, types.boolean, i64, i64, types.Array(i64, 1, "C"),
+                           ref)))
 
 
 @njit(inline="always", **KERNEL)
 def _collide_chunk(pos: np.ndarray, last: np.ndarray, col: tuple, at: int, cols_type: Any, c: int) -> None:
     cols = load_value(at, cols_type)
-    collide_colliders(cols, pos, last, col.free, member_flags(cols, False), col.offset, c)
+    collide_by_address(cols, col.calls, pos, last, col.free, member_flags(cols, False), col.offset, np.int64(c),
+                       np.int64(c + 1))
 
 
 @njit(**PARALLEL)
@@ -196,10 +307,12 @@ def collide_reachable(pos: np.ndarray, last: np.ndarray, col: tuple, cols: tuple
     """The collider pass of every integrator but the thread team's, at substep ``substep`` of the
     call: moving colliders posed, the cloth bounded, reach tested, then the work items over the
     cores; returns the colliders ruled out. ``col`` is the
-    :class:`~clothsim.sim.state.Colliders` group, ``cols`` the kinds' groups."""
-    pose_colliders(cols, substep)
+    :class:`~clothsim.sim.state.Colliders` group (its ``calls`` filled: :func:`kind_addresses`),
+    ``cols`` the kinds' groups."""
+    calls = col.calls
+    pose_by_address(cols, calls, np.int64(substep))
     cloth_bounds(pos, last, col.box)
-    skipped = reach_colliders(cols, col.box, member_flags(cols, False), col.offset)
+    skipped = reach_by_address(cols, calls, col.box, member_flags(cols, False), col.offset, np.zeros(1, np.int64))
     # the loop's threads take the groups by address: a parallel loop takes no tuple of groups
     # (see jit.internals.stack_address)
     at = stack_address(cols)

@@ -463,18 +463,30 @@ def reach(g: MeshGroup, box: np.ndarray, on: np.ndarray, offset: float) -> int:
     return skipped
 
 
+@njit(inline="always", **EXACT)
+def _untracked(g: MeshGroup) -> MeshGroup:
+    # the mesh pass reads the poses, never the tracks: without them its type is the same for a
+    # moving mesh and a fixed one, so both run one compiled pass
+    return MeshGroup(g.verts, g.tris, g.tbox, g.fnorm, g.enorm, g.vnorm, g.info, g.dims, g.cell_start, g.cell_tris,
+                     g.cell_box, g.near_at, g.near_n, g.near_tris, g.pose, g.thickness, g.on, None, g.collide)
+
+
 @njit(**EXACT)
 def collide(g: MeshGroup, pos: np.ndarray, last: np.ndarray, free: np.ndarray, c: int, on: np.ndarray,
             offset: float) -> None:
     """Work item ``c`` of the free points against the reachable meshes: :func:`collide_meshes_chunk`
     called by its address (``g.collide``, see :func:`collide_address`), so that it is compiled on
-    its own, once per group type, and not again inside every kernel that runs the pass."""
-    call_native(g.collide, (pos, last, free, g, on, np.int64(c)))
+    its own, once for every group of meshes, moving or not, and not again inside every kernel
+    that runs the pass."""
+    call_native(g.collide, (pos, last, free, _untracked(g), on, np.int64(c)))
 
 
 def collide_types(pos: types.Type, last: types.Type, free: types.Type, group: types.Type) -> tuple:
-    """The argument types :func:`collide_meshes_chunk` is compiled for, given those of the state."""
-    return (pos, last, free, group, types.Array(types.bool_, 1, "C"), types.int64)
+    """The argument types :func:`collide_meshes_chunk` is compiled for, given those of the state
+    and of the mesh group (whose tracks it does not get)."""
+    untracked = types.NamedTuple([types.none if name == "tracks" else t for name, t in zip(group.fields, group.types)],
+                                 MeshGroup)
+    return (pos, last, free, untracked, types.Array(types.bool_, 1, "C"), types.int64)
 
 
 def collide_address(g: MeshGroup, pos: np.ndarray, last: np.ndarray, free: np.ndarray) -> int:
