@@ -11,7 +11,7 @@ from ..scene import Scene, check_field
 from ..validate import At, check, integer
 from ..wind import WINDS
 from . import team
-from .passes.colliders import KIND_CALLS, kind_addresses, plan_colliders
+from .passes.colliders import KIND_CALLS, SETS, kind_addresses, plan_colliders
 from .passes.colliders.plane import SURFACE_OFFSET
 from .solvers.frame import CALLS, PASS_ALL, Addresses, kernel_addresses, run_substeps, with_mesh_address
 from .passes.forces import plan_forces
@@ -212,8 +212,8 @@ class Simulation:
             if isinstance(g, MeshGroup) and not g.collide:
                 self._kernel_args = plan = with_mesh_address(plan, collide_address(g, plan.st.pos, plan.st.last,
                                                                                    self.free))
-        if plan.col is not None and not plan.col.calls.all():
-            plan.col.calls[:] = kind_addresses(plan.colliders, plan.st.pos, plan.st.last, plan.col)
+        if plan.col is not None and not plan.col.sets.all():
+            plan.col.calls[:], plan.col.sets[:] = kind_addresses(plan.colliders, plan.st.pos, plan.st.last, plan.col)
         return plan
 
     @property
@@ -307,7 +307,7 @@ class Simulation:
                 margin = 1.001 * response_reach(contact)
             col = Colliders(self.free, SURFACE_OFFSET, self._box, self._boxes, margin,
                             any(g.tracks is not None for g in self._colliders),
-                            np.zeros((len(self._colliders), KIND_CALLS), np.int64))
+                            np.zeros((len(self._colliders), KIND_CALLS), np.int64), np.zeros(SETS, np.int64))
         return Plan(st, spec, grid, col, self._colliders, plan_forces(self), self._pin_group(), contact)
 
     def _contact_group(self) -> tuple | None:
@@ -410,6 +410,7 @@ class Simulation:
                 plan = plan._replace(spec=plan.spec._replace(repel=self._kernels.repel))
             if plan.col is not None:
                 plan.col.calls[:] = self._kernels.colliders
+                plan.col.sets[:] = self._kernels.sets
             self._kernel_args = with_mesh_address(plan, self._kernels.collide)
         k = self._kernels
         self.colliders_skipped += run_substeps(steps, self._kernel_args, self._sync, size, passes, k.member, k.enter,

@@ -97,6 +97,9 @@ class Colliders(NamedTuple):
     #: :func:`clothsim.sim.solvers.frame.kernel_addresses` or
     #: :func:`clothsim.sim.passes.colliders.kind_addresses`); zeros until known
     calls: np.ndarray
+    #: (:data:`~clothsim.sim.passes.colliders.SETS`,) addresses of the kernels of the plan's set of
+    #: kinds (:func:`clothsim.sim.passes.colliders.set_kernels`), filled as ``calls``
+    sets: np.ndarray
 
 
 class PinMotion(NamedTuple):
@@ -117,8 +120,9 @@ class Corrections(NamedTuple):
     """The position corrections every integrator but the fast path runs after its advance
     (:func:`clothsim.sim.passes.corrections.corrections`): the pinned mask, the self-collision mode
     (0 = off) with its hash (a :class:`GridHash`, whichever the mode), Provot's limit (<= 0 = off),
-    the :class:`Colliders` group (None when the scene has none) with the collider kinds' groups, and
-    the contact mode's group (None in every other mode)."""
+    the :class:`Colliders` group (None when the scene has none) with the collider kinds' groups
+    (the tuple; in the kernels, its address: see :func:`clothsim.sim.solvers.substep.integrate_substeps`),
+    and the contact mode's group (None in every other mode)."""
 
     pinned: np.ndarray
     self_mode: int

@@ -12,9 +12,10 @@ import numpy as np
 from numba import njit
 
 from ...jit import EXACT
+from ...jit.internals import call_native, type_ref
 
 from .provot import provot
-from .colliders import collide_reachable
+from .colliders import SET_REACHABLE
 from .selfcollide import self_collide
 from .contact import contact_bound, contact_respond
 from ..state import Corrections
@@ -26,7 +27,9 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
     """Apply self-collision, colliders and Provot in place at substep ``substep`` of the call;
     returns the colliders skipped.
 
-    ``post`` is the :class:`~clothsim.sim.state.Corrections` group.
+    ``post`` is the :class:`~clothsim.sim.state.Corrections` group, with the address of the
+    collider kinds' groups in place of the tuple (so that one compiled kernel serves every set of
+    kinds).
     """
     skipped = 0
     if post.self_mode != 0:
@@ -51,11 +54,15 @@ def corrections_into(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks
 
 
 @njit(**EXACT)
-def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, colliders: tuple, substep: int) -> int:
-    """The collider pass when the scene has colliders (``col`` is not None); returns those skipped."""
+def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, at: int, substep: int) -> int:
+    """The collider pass when the scene has colliders (``col`` is not None), the kinds' groups at
+    the address ``at``: :func:`~clothsim.sim.passes.colliders.collide_reachable` for the plan's
+    set of kinds, by its address; returns the colliders skipped."""
     if col is None:
         return 0
-    return collide_reachable(pos, last, col, colliders, substep)
+    skipped = np.zeros(1, np.int64)
+    call_native(col.sets[SET_REACHABLE], (pos, last, col, at, np.int64(substep), skipped, type_ref(None)))
+    return skipped[0]
 
 
 @njit(**EXACT)

@@ -128,8 +128,9 @@ def corrections_address(step: Step, post: Corrections) -> int:
     from ...jit.internals import native_address
 
     i64 = numba.types.int64
+    # the kernel gets the collider kinds' groups by address (see substep.integrate_substeps)
     argtypes = (*(numba.typeof(x) for x in (step.pos, step.last, step.free, step.blocks, step.rest)), i64,
-                numba.typeof(post), i64, numba.types.Array(i64, 1, "C"))
+                numba.typeof(post._replace(colliders=0)), i64, numba.types.Array(i64, 1, "C"))
     with compiling_alone(corrections_into, argtypes):
         return native_address(corrections_into, argtypes)
 

@@ -45,7 +45,7 @@ from ...jit import CHUNKS, KERNEL, PARALLEL
 from ...jit.internals import call_native, load_value, native_address, stack_address, type_ref
 
 from ..passes.forces import force_gather, force_work
-from ..passes.colliders import kind_kernels, set_kernels
+from ..passes.colliders import SET_COLLIDE, SET_POSE, kind_kernels, set_kernels
 from ..passes.colliders.bounds import member_bounds, merge_bounds
 from ..passes.provot import provot_bands, provot_bands_of, provot_cuts_of
 from ..passes.springs import gather_one, spring_jobs
@@ -64,13 +64,10 @@ PASS_INTEGRATE, PASS_SELF, PASS_COLLIDERS, PASS_PROVOT, PASS_CONTACT = 1, 2, 4, 
 PASS_ALL = 31
 
 #: The passes the member calls by address, in ``ClothState.calls``: those every plan runs, then
-#: the contact mode's two (0 without it), then the colliders' (0 without them: see
-#: :func:`~clothsim.sim.passes.colliders.pose_set`). Each is compiled once for every plan that
-#: has it, so that a plan compiles only its own loop, and the member does not depend on which
-#: collider kinds a plan has.
-CALL_SPRINGS, CALL_GATHER, CALL_VERLET, CALL_BANDS, CALL_CUTS, CALL_RESPOND, CALL_BOUND, CALL_POSE_SET, \
-    CALL_COLLIDE_SET = range(9)
-CALLS = 9
+#: the contact mode's two (0 without it). Each is compiled once for every plan that has it, so
+#: that a plan compiles only its own loop.
+CALL_SPRINGS, CALL_GATHER, CALL_VERLET, CALL_BANDS, CALL_CUTS, CALL_RESPOND, CALL_BOUND = range(7)
+CALLS = 7
 
 
 @njit(**KERNEL)
@@ -213,7 +210,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             if colliding:
                 if posing:
                     if member == 0:
-                        call_native(st.calls[CALL_POSE_SET], (colliders_at, col.calls, np.int64(substep), type_ref(None)))
+                        call_native(col.sets[SET_POSE], (colliders_at, col.calls, np.int64(substep), type_ref(None)))
                     gen = barrier(sync, size, gen)
                     if gen < 0:
                         return
@@ -227,8 +224,8 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     if gen < 0:
                         return
                     merge_bounds(col.boxes, 0.0, box)
-                call_native(st.calls[CALL_COLLIDE_SET], (colliders_at, col.calls, pos, last, col.free, box, col.offset,
-                                                         own, np.int64(lo), np.int64(hi), skipped, type_ref(None)))
+                call_native(col.sets[SET_COLLIDE], (colliders_at, col.calls, pos, last, col.free, box, col.offset, own,
+                                                    np.int64(lo), np.int64(hi), skipped, type_ref(None)))
                 if member == 0:
                     st.skips[0] += skipped[0]
                 gen = barrier(sync, size, gen)
@@ -292,7 +289,7 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         state = (st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
                  *(col.types[col.fields.index(name)] for name in ("free", "box", "offset")))
         kinds = [kind_kernels(g, *state) for g in groups.colliders.types]
-        sets = set_kernels(groups.colliders, *state)
+        sets = set_kernels(groups.colliders, col, *state[:2])
     # the member takes the kinds' groups by address (see _enter): one member for every set of kinds
     member = tuple(i64 if k == 3 + Plan._fields.index("colliders") else t for k, t in enumerate(argtypes))
     enter = (i64, i64, i64, i64, i64, sync, i64, types.TypeRef(plan_type))
@@ -320,13 +317,13 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         # the kinds' collider passes compile beside the member, the rest here
         compile_elsewhere(_member, member, meanwhile, (*(kernel for row in kinds for kernel in row), *sets))
         # (compiled here, on one core or when the second process failed)
-        calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0, 0)),
-                 *((native_address(*c) for c in sets) if sets else (0, 0)))
+        calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0, 0)))
         return Addresses(native_address(_member, member),
                          0 if repel is None else native_address(repel_slots, repel),
                          0 if collide is None else native_address(collide_meshes_chunk, collide),
                          native_address(_enter, enter), native_address(_launch, launch), calls,
-                         tuple(tuple(native_address(*kernel) for kernel in row) for row in kinds))
+                         tuple(tuple(native_address(*kernel) for kernel in row) for row in kinds),
+                         tuple(native_address(*kernel) for kernel in sets))
 
 
 @lru_cache(maxsize=None)
@@ -365,6 +362,8 @@ class Addresses(NamedTuple):
     calls: tuple[int, ...]
     #: each kind's collider passes (``Colliders.calls``, a row per kind: :data:`~clothsim.sim.passes.colliders.KIND_CALLS`; empty without colliders)
     colliders: tuple[tuple[int, ...], ...]
+    #: the kernels of the plan's set of kinds (``Colliders.sets``, :data:`~clothsim.sim.passes.colliders.SETS`; empty without colliders)
+    sets: tuple[int, ...]
 
 
 def kernel_addresses(plan: Plan, sync: np.ndarray) -> Addresses:

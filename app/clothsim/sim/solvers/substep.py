@@ -22,9 +22,10 @@ from numba import njit
 from ...jit import EXACT, KERNEL
 from ..passes.forces import add_forces
 from ..passes.springs import accumulate_forces
-from ...jit.internals import call_native
+from ...jit.internals import call_native, stack_address
 from ..clock import substep_time
 from ..passes.pins import move_pins, pin_velocities
+from ..state import Corrections
 from .implicit import Implicit, implicit_update
 from .symplectic import Symplectic, symplectic_step
 from .verlet import VerletRate, verlet_rate_step
@@ -82,6 +83,10 @@ def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, forces: 
     iterations = 0
     offset = np.empty(3)
     out = np.zeros(1, np.int64)
+    # the corrections take the collider kinds' groups by address (valid through this call): one
+    # compiled corrections kernel for every set of kinds
+    post = Corrections(post.pinned, post.self_mode, post.hash, post.stretch_limit, post.col,
+                       stack_address(post.colliders), post.contact, post.at)
     for substep in range(steps):
         # forces: XPBD takes the springs as constraints, and only the other forces as forces. (Each test
         # names a group that is None for XPBD: Numba prunes a branch on an argument that is None,

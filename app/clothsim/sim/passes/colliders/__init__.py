@@ -42,7 +42,7 @@ from numba.extending import overload
 
 from ....colliders import KINDS
 from ....jit import CHUNKS, KERNEL, PARALLEL
-from ....jit.internals import call_native, load_value, stack_address, type_ref
+from ....jit.internals import call_native, load_value
 from .bounds import cloth_bounds
 
 #: Every kind's pass module, in registry order (the order a point meets them).
@@ -189,21 +189,6 @@ def kind_kernels(group: types.Type, pos: types.Type, last: types.Type, free: typ
             (collide_kind, (group, pos, last, free, on, offset, i64, i64)))
 
 
-def kind_addresses(cols: tuple, pos: np.ndarray, last: np.ndarray, col: Any) -> np.ndarray:
-    """``Colliders.calls`` for the groups ``cols`` and the state's arrays: each kind's passes
-    compiled (or loaded from the cache) by one process at a time."""
-    from ....jit.compile import compiling_alone
-    from ....jit.internals import native_address
-
-    state = tuple(typeof(x) for x in (pos, last, col.free, col.box, col.offset))
-    calls = np.zeros((len(cols), KIND_CALLS), np.int64)
-    for k, g in enumerate(cols):
-        kernels = kind_kernels(typeof(g), *state)
-        with compiling_alone(*kernels[COLLIDE]):
-            calls[k] = [native_address(*kernel) for kernel in kernels]
-    return calls
-
-
 def pose_by_address(cols: tuple, calls: np.ndarray, substep: int) -> None:
     """:func:`pose_kind` of every kind of ``cols``, by the addresses in ``calls`` (compiled code only)."""
     raise NotImplementedError("compiled code only")
@@ -283,18 +268,6 @@ def collide_set(at: int, calls: np.ndarray, pos: np.ndarray, last: np.ndarray, f
     collide_by_address(cols, calls, pos, last, free, ons, offset, lo, hi)
 
 
-def set_kernels(cols: types.Type, pos: types.Type, last: types.Type, free: types.Type, box: types.Type,
-                offset: types.Type) -> tuple[tuple[Any, tuple], tuple[Any, tuple]]:
-    """(kernel, argument types) of :func:`pose_set` and :func:`collide_set` for a plan's tuple of
-    groups ``cols`` and the state's types."""
-    i64 = types.int64
-    calls = types.Array(i64, 2, "C")
-    ref = types.TypeRef(cols)
-    return ((pose_set, (i64, calls, i64, ref)),
-            (collide_set, (i64, calls, pos, last, free, box, offset, types.boolean, i64, i64, types.Array(i64, 1, "C"),
-                           ref)))
-
-
 @njit(inline="always", **KERNEL)
 def _collide_chunk(pos: np.ndarray, last: np.ndarray, col: tuple, at: int, cols_type: Any, c: int) -> None:
     cols = load_value(at, cols_type)
@@ -303,20 +276,58 @@ def _collide_chunk(pos: np.ndarray, last: np.ndarray, col: tuple, at: int, cols_
 
 
 @njit(**PARALLEL)
-def collide_reachable(pos: np.ndarray, last: np.ndarray, col: tuple, cols: tuple, substep: int) -> int:
+def collide_reachable(pos: np.ndarray, last: np.ndarray, col: tuple, at: int, substep: int, skipped: np.ndarray,
+                      cols_type: Any) -> None:
     """The collider pass of every integrator but the thread team's, at substep ``substep`` of the
     call: moving colliders posed, the cloth bounded, reach tested, then the work items over the
-    cores; returns the colliders ruled out. ``col`` is the
-    :class:`~clothsim.sim.state.Colliders` group (its ``calls`` filled: :func:`kind_addresses`),
-    ``cols`` the kinds' groups."""
+    cores; the colliders ruled out go to ``skipped[0]``. ``col`` is the
+    :class:`~clothsim.sim.state.Colliders` group, the kinds' groups are read from the address
+    ``at`` (see :func:`pose_set`). Compiled per set of kinds and called by address
+    (``Colliders.sets``), so that the corrections that call it are one kernel for every set."""
+    cols = load_value(at, cols_type)
     calls = col.calls
-    pose_by_address(cols, calls, np.int64(substep))
+    pose_by_address(cols, calls, substep)
     cloth_bounds(pos, last, col.box)
-    skipped = reach_by_address(cols, calls, col.box, member_flags(cols, False), col.offset, np.zeros(1, np.int64))
-    # the loop's threads take the groups by address: a parallel loop takes no tuple of groups
-    # (see jit.internals.stack_address)
-    at = stack_address(cols)
-    cols_type = type_ref(cols)
+    skipped[0] = reach_by_address(cols, calls, col.box, member_flags(cols, False), col.offset, skipped)
+    # the loop's threads read the groups from the address too: a parallel loop takes no tuple of
+    # groups (see jit.internals.stack_address)
     for c in prange(CHUNKS):
         _collide_chunk(pos, last, col, at, cols_type, c)
-    return skipped
+
+
+#: Columns of ``Colliders.sets``: the kernels of a plan's set of kinds (:func:`set_kernels`).
+SET_POSE, SET_COLLIDE, SET_REACHABLE = range(3)
+SETS = 3
+
+
+def set_kernels(cols: types.Type, col: types.Type, pos: types.Type, last: types.Type) -> tuple[tuple[Any, tuple], ...]:
+    """(kernel, argument types) of :func:`pose_set`, :func:`collide_set` and
+    :func:`collide_reachable` (``SET_*`` order) for a plan's tuple of groups ``cols``, its
+    :class:`~clothsim.sim.state.Colliders` group ``col`` and the state's types."""
+    i64 = types.int64
+    calls = col.types[col.fields.index("calls")]
+    free, box, offset = (col.types[col.fields.index(name)] for name in ("free", "box", "offset"))
+    scratch = types.Array(i64, 1, "C")
+    ref = types.TypeRef(cols)
+    return ((pose_set, (i64, calls, i64, ref)),
+            (collide_set, (i64, calls, pos, last, free, box, offset, types.boolean, i64, i64, scratch, ref)),
+            (collide_reachable, (pos, last, col, i64, i64, scratch, ref)))
+
+
+def kind_addresses(cols: tuple, pos: np.ndarray, last: np.ndarray, col: Any) -> tuple[np.ndarray, np.ndarray]:
+    """``Colliders.calls`` and ``Colliders.sets`` for the groups ``cols`` and the state's arrays:
+    each kind's passes and the set's kernels compiled (or loaded from the cache) by one process at
+    a time."""
+    from ....jit.compile import compiling_alone
+    from ....jit.internals import native_address
+
+    state = tuple(typeof(x) for x in (pos, last, col.free, col.box, col.offset))
+    calls = np.zeros((len(cols), KIND_CALLS), np.int64)
+    for k, g in enumerate(cols):
+        kernels = kind_kernels(typeof(g), *state)
+        with compiling_alone(*kernels[COLLIDE]):
+            calls[k] = [native_address(*kernel) for kernel in kernels]
+    kernels = set_kernels(typeof(cols), typeof(col), state[0], state[1])
+    with compiling_alone(*kernels[SET_REACHABLE]):
+        sets = np.array([native_address(*kernel) for kernel in kernels], np.int64)
+    return calls, sets
