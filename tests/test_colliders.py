@@ -176,9 +176,15 @@ def _dropped(capsule: dict, box: dict, frames: int = 90) -> Simulation:
 
 
 FAR_BOX = {"center": [5.0, 0.0, 5.0], "half_extents": [0.2, 0.2, 0.2], "friction": 0.5}
+#: The tests that compile the capsule's and the moving box's plans run on one worker, one after
+#: another: on two workers the second waited for the first's compile (up to 11 s) on a cold cache.
+SHARED_PLANS = pytest.mark.xdist_group("capsule and moving box plans")
+
+
 FAR_CAPSULE = {"a": [-5.0, 0.0, 0.0], "b": [-5.0, 1.0, 0.0], "radius": 0.1, "friction": 0.5}
 
 
+@SHARED_PLANS
 def test_cloth_dropped_on_a_capsule_ends_outside_it() -> None:
     capsule = {"a": [-0.1, 0.6, 0.4], "b": [0.9, 0.7, 0.4], "radius": 0.08, "friction": 0.3}
     sim = _dropped(capsule, FAR_BOX)
@@ -200,6 +206,7 @@ def test_cloth_dropped_on_a_rotated_box_ends_outside_it() -> None:
     assert sim.colliders_skipped >= 90 * 30  # the far capsule
 
 
+@SHARED_PLANS
 def test_far_capsule_and_box_are_skipped_and_cost_nothing() -> None:
     # Both far away: every test is ruled out by the bounding box, and the cloth falls freely,
     # bit for bit as with no capsule or box.
@@ -235,6 +242,7 @@ def _on_a_moving_box(friction: float) -> Simulation:
     return sim
 
 
+@SHARED_PLANS
 def test_the_pass_by_pass_profile_gives_the_same_bits_with_a_moving_box() -> None:
     # --profile runs each pass of a substep as its own call; every pass must see the substep's time
     from clothsim.sim.profile import Profiler
@@ -248,6 +256,7 @@ def test_the_pass_by_pass_profile_gives_the_same_bits_with_a_moving_box() -> Non
     assert plain.positions.tobytes() == profiled.positions.tobytes()
 
 
+@SHARED_PLANS
 def test_cloth_on_a_moving_box_is_carried_along_by_friction() -> None:
     sims = {f: _on_a_moving_box(f) for f in (0.0, 0.3, 0.9)}
     moved = {}

@@ -116,6 +116,22 @@ def test_compile_rejects_a_bad_number_of_jobs(jobs: str, message: str) -> None:
     assert done.stderr.strip().splitlines() == [message]
 
 
+def _start_together(commands: list[list[str]], **popen: object) -> list[subprocess.Popen]:
+    """Start ``commands``, wait until each has printed its "ready" line, then let them all go at
+    once (a line on their standard input): what they do next, they do at the same moment."""
+    procs = [subprocess.Popen(c, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              **popen) for c in commands]
+    for p in procs:
+        line = p.stdout.readline()
+        if line != "ready\n":  # it failed before: its error is on stderr
+            p.kill()
+            raise AssertionError(f"{line!r}: {p.stderr.read()}")
+    for p in procs:
+        p.stdin.write("go\n")
+        p.stdin.flush()
+    return procs
+
+
 _CACHE_PROBE = """
 import numpy as np
 from clothsim.sim.rest import max_displacement
@@ -154,13 +170,12 @@ def test_a_change_to_any_kernel_module_makes_every_cached_kernel_stale(tmp_path:
 
 
 _CONCURRENT_PROBE = """
-import sys, time
+import sys
 import numpy as np
 from clothsim.sim.rest import max_displacement
 dtype = np.dtype(sys.argv[1])
-start = float(sys.argv[2])
-while time.time() < start:  # every process compiles at the same moment
-    time.sleep(0.001)
+print("ready", flush=True)
+sys.stdin.readline()  # every process compiles at the same moment: when all are ready
 a = np.zeros((3, 4), dtype=dtype)
 b = np.ones((3, 4), dtype=dtype)
 print(max_displacement(a, b))
@@ -181,17 +196,13 @@ def test_processes_compiling_one_kernel_at_once_leave_a_cache_every_process_can_
     # cold start of the suite's workers or of a sweep's): afterwards a seventh loads all six from
     # the cache and each computes what it should. (Without the lock around Numba's save, one
     # run in three of the four-signature version failed here: two signatures shared a data file.)
-    import time
-
     site = tmp_path / "site"
     shutil.copytree(REPO / "app" / "clothsim", site / "clothsim",
                     ignore=shutil.ignore_patterns("__pycache__", "*.nbi", "*.nbc"))
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "PYTHONPATH")}
     env["PYTHONPATH"] = str(site)
-    start = time.time() + 8.0
-    procs = [subprocess.Popen([sys.executable, "-c", _CONCURRENT_PROBE, kind, str(start)], env=env, cwd=tmp_path,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for kind in ("f8", "f4", "i8", "i4", "i2", "u4")]
+    procs = _start_together([[sys.executable, "-c", _CONCURRENT_PROBE, kind] for kind in ("f8", "f4", "i8", "i4", "i2", "u4")],
+                            env=env, cwd=tmp_path)
     for p in procs:
         out, err = p.communicate(timeout=120)
         assert p.returncode == 0, err
@@ -203,16 +214,16 @@ def test_processes_compiling_one_kernel_at_once_leave_a_cache_every_process_can_
 
 
 _SAME_PLAN_PROBE = """
-import sys, time
+import sys
 from clothsim.scene import load_scene
 from clothsim.sim import Simulation
 from clothsim.sim.solvers.frame import _member
 from clothsim.sim.solvers.substep import integrate_substeps
-start, integrator = float(sys.argv[1]), sys.argv[2]
+integrator = sys.argv[1]
 sim = Simulation(load_scene("pinned2").with_simulation(self_collision="off", integrator=integrator).with_cloth(
     num_width_points=8, num_height_points=8))
-while time.time() < start:  # both processes reach the first frame at the same moment
-    time.sleep(0.001)
+print("ready", flush=True)
+sys.stdin.readline()  # both processes reach the first frame at the same moment: when both are ready
 sim.step(1)
 s = (_member if integrator == "verlet" else integrate_substeps).stats
 print(sum(s.cache_hits.values()), sum(s.cache_misses.values()))
@@ -224,13 +235,9 @@ def test_processes_starting_one_plan_at_once_compile_it_once(tmp_path: Path, int
     # Two processes reach the first frame of the same plan at the same moment on a cold cache (the
     # suite's workers, a sweep's local workers): one compiles the plan's kernel (the team's member,
     # or another integrator's substep), the other waits for it and loads it from the cache.
-    import time
-
     env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
     env.update(NUMBA_CACHE_DIR=str(tmp_path / "cache"), CLOTHSIM_COMPILE_JOBS="1")
-    start = time.time() + 4.0  # after both have imported and built their scene
-    procs = [subprocess.Popen([sys.executable, "-c", _SAME_PLAN_PROBE, str(start), integrator], env=env, cwd=tmp_path,
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    procs = _start_together([[sys.executable, "-c", _SAME_PLAN_PROBE, integrator]] * 2, env=env, cwd=tmp_path)
     counts = []
     for p in procs:
         out, err = p.communicate(timeout=240)

@@ -219,14 +219,19 @@ def test_corrupted_scenes_run_or_fail_cleanly(d):
 
 
 EXTENSIONS = settings(FUZZ, max_examples=40)
+#: Both run one plan (every extension at once): on one worker, one after the other (on two, the
+#: second waited for the first's compile on a cold cache).
+EXTENSIONS_PLAN = pytest.mark.xdist_group("every extension's plan")
 
 
+@EXTENSIONS_PLAN
 @EXTENSIONS
 @given(extension_scene())
 def test_scenes_with_every_extension_run_or_fail_cleanly(d):
     _clean_run_or_clothsim_error(d)
 
 
+@EXTENSIONS_PLAN
 @EXTENSIONS
 @given(corrupted_scene(extension_scene()))
 def test_corrupted_extensions_run_or_fail_cleanly(d):

@@ -224,8 +224,11 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     if gen < 0:
                         return
                     merge_bounds(col.boxes, 0.0, box)
-                call_native(col.sets[SET_COLLIDE], (colliders_at, col.calls, pos, last, col.free, box, col.offset, own,
-                                                    np.int64(lo), np.int64(hi), skipped, type_ref(None)))
+                # (it allocates the reach flags of a member other than the first: a failure ends
+                # this member as a failed allocation of its own would)
+                if call_native(col.sets[SET_COLLIDE], (colliders_at, col.calls, pos, last, col.free, box, col.offset,
+                                                       own, np.int64(lo), np.int64(hi), skipped, type_ref(None))) != 0:
+                    raise MemoryError("the collider pass could not allocate its reach flags")
                 if member == 0:
                     st.skips[0] += skipped[0]
                 gen = barrier(sync, size, gen)
