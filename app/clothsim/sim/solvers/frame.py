@@ -305,8 +305,8 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
 
     def meanwhile() -> None:
         _shared_addresses(st)
-        for kernel, kinds in contact or ():
-            kernel.compile(kinds)
+        for kernel, signature in (*(contact or ()), *(kernel for row in kinds for kernel in row)):
+            kernel.compile(signature)
         if repel is not None:
             repel_slots.compile(repel)
         if collide is not None:
@@ -317,8 +317,9 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         warm_side_kernels()
 
     with compiling_alone(_member, member):
-        # the kinds' collider passes compile beside the member, the rest here
-        compile_elsewhere(_member, member, meanwhile, (*(kernel for row in kinds for kernel in row), *sets))
+        # the set's small kernels compile beside the member, the rest here (the kinds' passes too:
+        # with them the second process was the longer by 3-4 s)
+        compile_elsewhere(_member, member, meanwhile, sets)
         # (compiled here, on one core or when the second process failed)
         calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0, 0)))
         return Addresses(native_address(_member, member),
