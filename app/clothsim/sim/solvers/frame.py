@@ -45,7 +45,7 @@ from ...jit import CHUNKS, KERNEL, PARALLEL
 from ...jit.internals import call_native, load_value, native_address, stack_address, type_ref
 
 from ..passes.forces import force_gather, force_work
-from ..passes.colliders import SET_COLLIDE, SET_POSE, kind_kernels, set_kernels
+from ..passes.colliders import SET_COLLIDE, SET_POSE, SET_REACHABLE, kind_kernels, set_kernels
 from ..passes.colliders.bounds import member_bounds, merge_bounds
 from ..passes.provot import provot_bands, provot_bands_of, provot_cuts_of
 from ..passes.springs import gather_one, spring_jobs
@@ -281,7 +281,7 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
     col = groups.col
     meshes = [t for t in groups.colliders.types if getattr(t, "instance_class", None) is MeshGroup]
     if meshes:
-        # the mesh pass too: compiled here meanwhile, and kept out of the member's module
+        # the mesh pass too: compiled on its own, and kept out of the member's module
         collide = collide_types(st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
                                 col.types[col.fields.index("free")], meshes[0])
     kinds: list[tuple[tuple, ...]] = []
@@ -292,7 +292,8 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         state = (st.types[st.fields.index("pos")], st.types[st.fields.index("last")],
                  *(col.types[col.fields.index(name)] for name in ("free", "box", "offset")))
         kinds = [kind_kernels(g, *state) for g in groups.colliders.types]
-        sets = set_kernels(groups.colliders, col, *state[:2])
+        # (the team does not use the other integrators' collider pass: compiled when one runs)
+        sets = set_kernels(groups.colliders, col, *state[:2])[:SET_REACHABLE]
     # the member takes the kinds' groups by address (see _enter): one member for every set of kinds
     member = tuple(i64 if k == 3 + Plan._fields.index("colliders") else t for k, t in enumerate(argtypes))
     enter = (i64, i64, i64, i64, i64, sync, i64, types.TypeRef(plan_type))
@@ -303,23 +304,25 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         pos, last = st.types[st.fields.index("pos")], st.types[st.fields.index("last")]
         contact = ((contact_respond, (pos, last, groups.contact)), (contact_bound, (pos, groups.contact)))
 
+    # A cold start's two processes: the second compiles the member (5-9 s cold) and the mesh
+    # pass (8-9 s) or else the set's two kernels (3 s), this one the rest (the kinds' passes
+    # 3-6 s, the shared passes, the launchers, the side kernels).
+    beside = ((collide_meshes_chunk, collide),) if collide is not None else sets
+    here = (*(contact or ()), *(kernel for row in kinds for kernel in row), *(sets if collide is not None else ()))
+
     def meanwhile() -> None:
         _shared_addresses(st)
-        for kernel, signature in (*(contact or ()), *(kernel for row in kinds for kernel in row)):
+        for kernel, signature in here:
             kernel.compile(signature)
         if repel is not None:
             repel_slots.compile(repel)
-        if collide is not None:
-            collide_meshes_chunk.compile(collide)
         _enter.compile(enter)
         _launch.compile(launch)
         run_substeps.compile((i64, plan_type, sync, i64, i64, i64, i64, i64))
         warm_side_kernels()
 
     with compiling_alone(_member, member):
-        # the set's small kernels compile beside the member, the rest here (the kinds' passes too:
-        # with them the second process was the longer by 3-4 s)
-        compile_elsewhere(_member, member, meanwhile, sets)
+        compile_elsewhere(_member, member, meanwhile, beside)
         # (compiled here, on one core or when the second process failed)
         calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0, 0)))
         return Addresses(native_address(_member, member),
@@ -327,7 +330,7 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
                          0 if collide is None else native_address(collide_meshes_chunk, collide),
                          native_address(_enter, enter), native_address(_launch, launch), calls,
                          tuple(tuple(native_address(*kernel) for kernel in row) for row in kinds),
-                         tuple(native_address(*kernel) for kernel in sets))
+                         (*(native_address(*kernel) for kernel in sets), 0) if sets else ())
 
 
 @lru_cache(maxsize=None)
