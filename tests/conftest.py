@@ -65,6 +65,25 @@ def run_cli(*args: str, cwd: Path | None = None, timeout: float = 300) -> subpro
                           timeout=timeout, env=env)
 
 
+def warm_copy(site: Path, *drop: str) -> None:
+    """The package the tests import, with its kernel cache, copied into ``site`` (a folder for
+    PYTHONPATH), less the cache files that the globs ``drop`` name (e.g. ``frame._member-*``): a
+    process running the copy loads what the suite has compiled and compiles those kernels alone.
+    (The cache is keyed on the package's text, not on where it lies.)"""
+    import shutil
+
+    import clothsim
+
+    shutil.copytree(Path(clothsim.__file__).resolve().parent, site / "clothsim",
+                    ignore=shutil.ignore_patterns("*.pyc", "*.compiling"))
+    for data in ("scenes", "glsl"):
+        if not (site / "clothsim" / data).exists():
+            shutil.copytree(REPO / data, site / "clothsim" / data)
+    for pattern in drop:
+        for cached in (site / "clothsim").rglob(f"__pycache__/{pattern}"):
+            cached.unlink()
+
+
 def child_pids(pid: int) -> list[int]:
     """The process ids of ``pid``'s children (Linux's /proc)."""
     kids: list[int] = []

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import REPO, run_cli
+from conftest import REPO, run_cli, warm_copy
 
 NOTICE = "clothsim: compiling kernels for this CPU (first run only"
 
@@ -230,22 +230,6 @@ print(sum(s.cache_hits.values()), sum(s.cache_misses.values()))
 """
 
 
-def _warm_copy(site: Path, drop: str) -> None:
-    """The package the tests import, with its kernel cache, copied into ``site`` (a folder for
-    PYTHONPATH), less the cache files of the kernel ``drop`` names (a glob such as
-    ``frame._member-*``): a process running the copy loads what the suite has compiled and
-    compiles that kernel alone. (The cache is keyed on the package's text, not on where it lies.)"""
-    import clothsim
-
-    shutil.copytree(Path(clothsim.__file__).resolve().parent, site / "clothsim",
-                    ignore=shutil.ignore_patterns("*.pyc", "*.compiling"))
-    for data in ("scenes", "glsl"):
-        if not (site / "clothsim" / data).exists():
-            shutil.copytree(REPO / data, site / "clothsim" / data)
-    for cached in (site / "clothsim").rglob(f"__pycache__/{drop}"):
-        cached.unlink()
-
-
 @pytest.mark.parametrize("integrator, kernel", [("verlet", "frame._member-*"),
                                                 ("symplectic_euler", "substep.integrate_substeps-*")])
 def test_processes_starting_one_plan_at_once_compile_it_once(tmp_path: Path, integrator: str, kernel: str) -> None:
@@ -255,7 +239,7 @@ def test_processes_starting_one_plan_at_once_compile_it_once(tmp_path: Path, int
     # and loads it from the cache. (The rest is loaded from a copy of the suite's cache: a cold
     # cache took 9 and 20 s here, for the same check.)
     site = tmp_path / "site"
-    _warm_copy(site, kernel)
+    warm_copy(site, kernel)
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "PYTHONPATH")}
     env.update(PYTHONPATH=str(site), CLOTHSIM_COMPILE_JOBS="1")
     procs = _start_together([[sys.executable, "-c", _SAME_PLAN_PROBE, integrator]] * 2, env=env, cwd=tmp_path)
