@@ -23,9 +23,9 @@ from ..state import Corrections
 
 @njit(**EXACT)
 def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.ndarray, rest: np.ndarray,
-                nw: int, post: tuple, substep: int) -> int:
+                nw: int, post: tuple, substep: int, scratch: np.ndarray) -> int:
     """Apply self-collision, colliders and Provot in place at substep ``substep`` of the call;
-    returns the colliders skipped.
+    returns the colliders skipped (``scratch``: one int64 the collider pass may write).
 
     ``post`` is the :class:`~clothsim.sim.state.Corrections` group, with the address of the
     collider kinds' groups in place of the tuple (so that one compiled kernel serves every set of
@@ -37,7 +37,7 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
         self_collide(pos, free, h.thickness, h.sim_steps, post.self_mode, h.cell[0], h.cell[1], h.cell[2], h.keys,
                      h.slots, h.start, h.order)
     contact_group(pos, last, post.contact, True)
-    skipped += collide_group(pos, last, post.col, post.colliders, substep)
+    skipped += collide_group(pos, last, post.col, post.colliders, substep, scratch)
     if post.stretch_limit > 0.0:
         provot(pos, post.pinned, blocks, rest, nw, post.stretch_limit)
     contact_group(pos, last, post.contact, False)
@@ -50,19 +50,20 @@ def corrections_into(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks
     """:func:`corrections`, compiled on its own for a call by address (``Corrections.at``): the
     integrators' substeps share it, and none links it in and re-optimises it; the colliders
     skipped go to ``skipped[0]``."""
-    skipped[0] = corrections(pos, last, free, blocks, rest, nw, post, substep)
+    skipped[0] = corrections(pos, last, free, blocks, rest, nw, post, substep, skipped)
 
 
 @njit(**EXACT)
-def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, at: int, substep: int) -> int:
+def collide_group(pos: np.ndarray, last: np.ndarray, col: tuple | None, at: int, substep: int,
+                  scratch: np.ndarray) -> int:
     """The collider pass when the scene has colliders (``col`` is not None), the kinds' groups at
     the address ``at``: :func:`~clothsim.sim.passes.colliders.collide_reachable` for the plan's
-    set of kinds, by its address; returns the colliders skipped."""
+    set of kinds, by its address (it writes the count into ``scratch[0]``); returns the colliders
+    skipped."""
     if col is None:
         return 0
-    skipped = np.zeros(1, np.int64)
-    call_native(col.sets[SET_REACHABLE], (pos, last, col, at, np.int64(substep), skipped, type_ref(None)))
-    return skipped[0]
+    call_native(col.sets[SET_REACHABLE], (pos, last, col, at, np.int64(substep), scratch, type_ref(None)))
+    return scratch[0]
 
 
 @njit(**EXACT)
