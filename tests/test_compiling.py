@@ -97,7 +97,7 @@ def test_bench_compile_reports_each_kernel_of_a_cold_start() -> None:
     # the passes every plan shares compile here while the plan's member compiles in a second
     # process (its row is the wait for it, under the --min threshold when it finished first)
     assert "sim.passes.springs.spring_jobs" in out
-    assert "sim.solvers.frame.run_substeps" in out
+    assert "sim.solvers.frame._launch" in out
 
 
 def test_bench_compile_rejects_an_unknown_command() -> None:

@@ -256,6 +256,71 @@ def load_value(typingctx, address, proto):  # noqa: ANN001, ANN201
     return sig, codegen
 
 
+def packed_value(value: Any, ty: types.Type) -> Any:
+    """``value`` (of Numba type ``ty``: tuples, named tuples, arrays and scalars) laid out as
+    :func:`stack_address` lays it out, arrays detached as there, in a buffer of this process: for
+    :func:`load_value` in a kernel called by address, without a kernel compiled for ``ty`` to copy
+    it (the team's plans: about 0.9 s of compiling a plan, docs/performance.md). The address is
+    ``ctypes.addressof`` of the result, valid while the result and ``value``'s arrays live."""
+    import ctypes
+
+    from numba.core.registry import cpu_target
+
+    context = cpu_target.target_context
+    llty = context.get_value_type(ty)
+    data = context.target_data
+    buffer = (ctypes.c_uint8 * max(1, llty.get_abi_size(data)))()
+    _write(ctypes.addressof(buffer), llty, _native_fields(value, ty), data)
+    return buffer
+
+
+def _native_fields(value: Any, ty: types.Type) -> Any:
+    """``value`` as nested lists of numbers, in the order of the fields of Numba's value model."""
+    if isinstance(ty, types.BaseTuple):
+        return [_native_fields(v, t) for v, t in zip(value, ty.types)]
+    if isinstance(ty, types.Array):
+        # the array model: meminfo, parent (none: detached), nitems, itemsize, data, shape, strides
+        return [0, 0, value.size, value.itemsize, value.ctypes.data, list(value.shape), list(value.strides)]
+    if isinstance(ty, (types.Integer, types.Boolean)):
+        return int(value)
+    if isinstance(ty, types.Float):
+        return float(value)
+    if isinstance(ty, types.NoneType):
+        return None
+    raise TypeError(f"packed_value: cannot lay out a {ty}")
+
+
+def _write(address: int, llty: ir.Type, value: Any, data: Any) -> None:
+    import ctypes
+
+    if value is None:  # (a pass the plan does not use: its bytes stay zero)
+        return
+    if isinstance(llty, ir.IntType):
+        if llty.width == 1:
+            ctypes.c_uint8.from_address(address).value = 1 if value else 0
+        else:
+            kind = {8: ctypes.c_int8, 16: ctypes.c_int16, 32: ctypes.c_int32, 64: ctypes.c_int64}[llty.width]
+            kind.from_address(address).value = value
+    elif isinstance(llty, ir.DoubleType):
+        ctypes.c_double.from_address(address).value = value
+    elif isinstance(llty, ir.FloatType):
+        ctypes.c_float.from_address(address).value = value
+    elif isinstance(llty, ir.PointerType):
+        ctypes.c_void_p.from_address(address).value = value or None
+    elif isinstance(llty, (ir.LiteralStructType, ir.ArrayType)):
+        elements = llty.elements if isinstance(llty, ir.LiteralStructType) else [llty.element] * llty.count
+        if isinstance(llty, ir.LiteralStructType) and llty.packed:
+            raise TypeError("packed_value: packed structs are not laid out")
+        offset = 0
+        for element, item in zip(elements, value, strict=True):
+            align = element.get_abi_alignment(data)
+            offset = -(-offset // align) * align
+            _write(address + offset, element, item, data)
+            offset += element.get_abi_size(data)
+    else:
+        raise TypeError(f"packed_value: cannot write LLVM type {llty}")
+
+
 @intrinsic
 def type_ref(typingctx, value):  # noqa: ANN001, ANN201
     """The type of ``value`` as a value (no data), for :func:`load_value`."""

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import ctypes
+
+import numba
 import numpy as np
 
 from ..cloth import (BENDING, BENDING_STIFFNESS_FACTOR, Springs, all_springs, enabled_mask, grid_positions,
@@ -17,6 +20,7 @@ from .solvers.frame import CALLS, PASS_ALL, Addresses, kernel_addresses, run_sub
 from .passes.forces import plan_forces
 from .passes.wind import triangles
 from ..jit import CHUNKS
+from ..jit.internals import packed_value
 from .passes.pins import move_pins
 from .passes.colliders.mesh import MeshGroup, collide_address
 from .passes.colliders.moving import top_speed
@@ -279,6 +283,8 @@ class Simulation:
         # the addresses of the kernels that run these groups, found on the first frame (typing the groups
         # to look it up takes ~0.36 ms: a third of a frame, if done every frame)
         self._kernels: Addresses | None = None
+        # the plan and its native layout for the team (see run_substeps)
+        self._packed: tuple | None = None
 
     def _pack(self) -> Plan:
         """The frame kernel's state groups (:mod:`clothsim.sim.state`), ``None`` for a pass the
@@ -413,8 +419,12 @@ class Simulation:
                 plan.col.sets[:] = self._kernels.sets
             self._kernel_args = with_mesh_address(plan, self._kernels.collide)
         k = self._kernels
-        self.colliders_skipped += run_substeps(steps, self._kernel_args, self._sync, size, passes, k.member, k.enter,
-                                               k.launch)
+        plan = self._kernel_args
+        if self._packed is None or self._packed[0] is not plan:
+            # (a plan is a tuple, replaced whole when a group changes: laid out again only then)
+            self._packed = (plan, packed_value(plan, numba.typeof(plan)))
+        self.colliders_skipped += run_substeps(steps, plan, self._sync, size, passes, k.member, k.enter,
+                                               ctypes.addressof(self._packed[1]))
         if passes == PASS_ALL:  # pass by pass (the profiler), the caller counts each substep once its passes ran
             self._clock[1] += steps
         if self._sync[team.FAILED]:
