@@ -235,3 +235,41 @@ def test_groups_handed_by_address_reach_every_thread_of_a_parallel_loop_whole(al
     assert np.array_equal(out, np.full(out.shape, 2.0 + 3.0 + 0.5 + 1.0 + 5.0))
     assert sys.getrefcount(a) == refs
     assert np.array_equal(a, np.arange(a.size))
+
+
+def test_a_plan_packed_in_python_reads_back_as_the_stack_copy_does() -> None:
+    # packed_value lays a value out as stack_address does (arrays detached): a kernel reading the
+    # address back sees the same arrays, scalars, flags and missing passes, and writes the caller's arrays
+    import ctypes
+    from collections import namedtuple
+
+    from numba import njit
+
+    from numba import types
+
+    from clothsim.jit.internals import load_value, packed_value
+
+    Inner = namedtuple("Inner", ["a", "k", "gone", "on", "n"])
+    Outer = namedtuple("Outer", ["inner", "b", "x", "pair"])
+
+    @njit
+    def read(at: int, proto, out: np.ndarray) -> None:  # noqa: ANN001
+        g = load_value(at, proto)
+        o = g[1]
+        o.inner.a[:] = 7.0
+        out[0] = o.inner.k + o.b.sum() + o.x + g[0][0]
+        out[1] = 1.0 if o.inner.gone is None else 0.0
+        out[2] = 1.0 if o.inner.on else 0.0
+        out[3] = o.inner.n + o.pair[0] + o.pair[1] + o.b.shape[1] + o.b.strides[0]
+
+    a = np.zeros(5)
+    b = np.arange(6.0).reshape(2, 3)
+    value = ((5.0,), Outer(Inner(a, 2.0, None, True, np.int64(3)), b, 0.5, (np.int64(4), np.int64(6))))
+    ty = numba.typeof(value)
+    buffer = packed_value(value, ty)
+    out = np.zeros(4)
+    read(ctypes.addressof(buffer), types.TypeRef(ty), out)
+    assert out.tolist() == [2.0 + 15.0 + 0.5 + 5.0, 1.0, 1.0, 3 + 4 + 6 + 3 + 24]
+    assert np.array_equal(a, np.full(5, 7.0))
+    with pytest.raises(TypeError, match="cannot lay out"):
+        packed_value(("text",), numba.typeof(("text",)))
