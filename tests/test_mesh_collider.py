@@ -132,6 +132,7 @@ def test_bundled_torus_is_what_the_generator_writes():
 
 
 # -- the grid against brute force -----------------------------------------------------------------
+@pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both
 def test_grid_gives_the_same_contacts_as_brute_force(tmp_path):
     rng = np.random.default_rng(7)
     for obj, mesh in ((torus_obj(*TORUS), {"translate": [0.5, 0.3, 0.5], "rotation": [20, 35, -10]}),
@@ -160,6 +161,7 @@ def _near_surface(group, rng, n: int, spread: float) -> np.ndarray:
     return np.ascontiguousarray(p.T)
 
 
+@pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both
 @pytest.mark.parametrize("thickness, crowded", [(THICKNESS, False), (0.03, True)])
 def test_each_points_list_gives_the_brute_force_contacts_as_the_points_move(tmp_path, thickness, crowded):
     # A finely tessellated torus (20,000 triangles) and a cloth of as many points as the test moves,
@@ -194,6 +196,7 @@ def test_each_points_list_gives_the_brute_force_contacts_as_the_points_move(tmp_
         assert listed.sum() > n // 2
 
 
+@pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both
 def test_a_point_that_jumps_through_a_sheet_in_one_substep_is_put_back_on_its_side(tmp_path):
     # 10 cm in one substep, ten times the thickness: only the swept (crossing) test can see it
     sheet = "v 0 0 0\nv 1 0 0\nv 1 0 1\nv 0 0 1\nf 1 2 3 4\n"
