@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -124,6 +126,16 @@ def pytest_sessionstart(session: pytest.Session) -> None:
     if done.returncode != 0:
         raise pytest.UsageError(f"clothsim compile failed before the tests:\n{done.stderr}")
     config.stash[_COMPILE_SECONDS] = time.perf_counter() - started
+    # its report, for the test of `clothsim compile`'s report (the workers inherit the variable)
+    report = Path(tempfile.mkdtemp(prefix="clothsim-compile-")) / "report.txt"
+    report.write_text(done.stdout)
+    os.environ[COMPILE_REPORT] = str(report)
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    report = os.environ.get(COMPILE_REPORT)
+    if report and not hasattr(config, "workerinput"):
+        shutil.rmtree(Path(report).parent, ignore_errors=True)
 
 
 def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter, config: pytest.Config) -> None:
@@ -133,6 +145,8 @@ def pytest_terminal_summary(terminalreporter: pytest.TerminalReporter, config: p
 
 
 _COMPILE_SECONDS = pytest.StashKey[float]()
+#: the environment variable naming the file with the report of the ``clothsim compile`` run before the tests
+COMPILE_REPORT = "CLOTHSIM_TESTS_COMPILE_REPORT"
 
 
 @pytest.fixture
