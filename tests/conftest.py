@@ -86,6 +86,16 @@ def warm_copy(site: Path, *drop: str) -> None:
             cached.unlink()
 
 
+def ctrl_c_as_on_a_terminal() -> None:
+    """A child's ``preexec_fn`` for the tests that press Ctrl-C: a suite started as a background
+    job (``cmd &`` in a script, where the shell ignores SIGINT for it) passes that on to every
+    child, which then rightly ignores Ctrl-C, as any program started so does; a command started
+    from a terminal has SIGINT's default."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def child_pids(pid: int) -> list[int]:
     """The process ids of ``pid``'s children (Linux's /proc)."""
     kids: list[int] = []

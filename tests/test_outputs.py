@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO, SCENES, error_line, run_cli
+from conftest import REPO, SCENES, ctrl_c_as_on_a_terminal, error_line, run_cli
 
 FAST = ("--frames", "2", "--every", "1", "--size", "64x64")
 
@@ -312,12 +312,6 @@ def test_failing_ffmpeg_is_one_line(tmp_path, monkeypatch):
 
 
 # -- Ctrl-C ----------------------------------------------------------------------------------------
-def _ctrl_c_as_on_a_terminal() -> None:
-    # A suite started as a background job (``cmd &`` in a script) runs with SIGINT ignored, and a
-    # child inherits that: the render would rightly ignore Ctrl-C, as any program started so does.
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
-
-
 def _interrupt_when(cwd: Path, out: str, started) -> subprocess.CompletedProcess:
     """Start a long render, wait until ``started(cwd)`` says it is writing, then Ctrl-C it.
 
@@ -329,7 +323,7 @@ def _interrupt_when(cwd: Path, out: str, started) -> subprocess.CompletedProcess
     p = subprocess.Popen([sys.executable, "-m", "clothsim", "render", "pinned2", "--no-rest", "--frames", "1000000",
                           "--every", "1", "--size", "64x64", "-o", out], cwd=cwd, env=env, text=True,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
-                         preexec_fn=_ctrl_c_as_on_a_terminal)
+                         preexec_fn=ctrl_c_as_on_a_terminal)
     try:
         deadline = time.monotonic() + 240
         while not started(cwd):

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import child_pids, error_line
+from conftest import child_pids, ctrl_c_as_on_a_terminal, error_line
 from test_locks import clothsim, kill9, manifest_ids, start, wait_for_holder
 
 LONG = ("--set", "cloth.ks=3000,4000,5000,6000", "--frames", "100000")
@@ -105,7 +105,8 @@ def test_ctrl_c_ends_a_local_sweep_within_seconds(tmp_path):
     needs_proc()
     out = tmp_path / "data"
     # Ctrl-C on a terminal reaches the whole process group.
-    proc = start("sweep", "pinned2", *LONG, "--workers", "2", "-o", str(out), start_new_session=True)
+    proc = start("sweep", "pinned2", *LONG, "--workers", "2", "-o", str(out), start_new_session=True,
+                 preexec_fn=ctrl_c_as_on_a_terminal)
     workers: list[int] = []
     tracker: list[int] = []
     try:
@@ -181,7 +182,8 @@ def test_ctrl_c_cancels_the_queued_dask_runs_at_once(tmp_path, cluster):
     local, client = cluster
     out = tmp_path / "data"
     proc = start("sweep", "pinned2", "--set", "cloth.ks=3000,3500,4000,4500,5000,5500", "--frames", "400",
-                 "--scheduler", local.scheduler_address, "-o", str(out), start_new_session=True)
+                 "--scheduler", local.scheduler_address, "-o", str(out), start_new_session=True,
+                 preexec_fn=ctrl_c_as_on_a_terminal)
     try:
         wait_for_holder(out / ".clothsim.lock", proc)
         deadline = time.monotonic() + 60
