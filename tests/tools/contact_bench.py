@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
         for mode, sim in sims.items():
             assert np.isfinite(sim.positions).all(), mode
             if n <= 100:
-                print(f"      {mode}: {sim.self_crossings()} crossings after {sim.frame} frames", flush=True)
+                print(f"      {mode}: {sim.crossings()} crossings after {sim.frame} frames", flush=True)
     return 0
 
 
