@@ -29,6 +29,7 @@ import functools
 import hashlib
 import os
 import platform
+import struct
 import time
 from pathlib import Path
 from typing import Any
@@ -264,61 +265,108 @@ def packed_value(value: Any, ty: types.Type) -> Any:
     ``ctypes.addressof`` of the result, valid while the result and ``value``'s arrays live."""
     import ctypes
 
+    layout = _LAYOUTS.get(ty)
+    if layout is None:
+        layout = _LAYOUTS[ty] = _layout(ty)
+    packer, size = layout
+    buffer = (ctypes.c_uint8 * max(1, size))()
+    try:
+        packer.pack_into(buffer, 0, *_native_fields(value, ty))
+    except struct.error as why:
+        raise TypeError(f"packed_value: {ty} does not lay out as expected: {why}") from None
+    return buffer
+
+
+#: the layout of each type packed so far: a struct.Struct over the value model's scalars (with
+#: the padding between them) and the size
+_LAYOUTS: dict[types.Type, tuple[struct.Struct, int]] = {}
+#: size and alignment of each scalar or pointer LLVM type met, as llvmlite reports them
+_LEAVES: dict[str, tuple[int, int]] = {}
+
+
+def _layout(ty: types.Type) -> tuple[struct.Struct, int]:
+    """The packer of ``ty``'s value model: its scalars in order at their offsets."""
     from numba.core.registry import cpu_target
 
     context = cpu_target.target_context
     llty = context.get_value_type(ty)
-    data = context.target_data
-    buffer = (ctypes.c_uint8 * max(1, llty.get_abi_size(data)))()
-    _write(ctypes.addressof(buffer), llty, _native_fields(value, ty), data)
-    return buffer
+    leaves: list[tuple[int, str]] = []
+    _place(llty, 0, leaves, context.target_data)
+    size = _abi(llty, context.target_data)[0]
+    fmt = "="
+    at = 0
+    for offset, code in leaves:
+        fmt += "x" * (offset - at) + code
+        at = offset + struct.calcsize("=" + code)
+    fmt += "x" * (size - at)
+    return struct.Struct(fmt), size
 
 
-def _native_fields(value: Any, ty: types.Type) -> Any:
-    """``value`` as nested lists of numbers, in the order of the fields of Numba's value model."""
-    if isinstance(ty, types.BaseTuple):
-        return [_native_fields(v, t) for v, t in zip(value, ty.types)]
-    if isinstance(ty, types.Array):
-        # the array model: meminfo, parent (none: detached), nitems, itemsize, data, shape, strides
-        return [0, 0, value.size, value.itemsize, value.ctypes.data, list(value.shape), list(value.strides)]
-    if isinstance(ty, (types.Integer, types.Boolean)):
-        return int(value)
-    if isinstance(ty, types.Float):
-        return float(value)
-    if isinstance(ty, types.NoneType):
-        return None
-    raise TypeError(f"packed_value: cannot lay out a {ty}")
-
-
-def _write(address: int, llty: ir.Type, value: Any, data: Any) -> None:
-    import ctypes
-
-    if value is None:  # (a pass the plan does not use: its bytes stay zero)
-        return
-    if isinstance(llty, ir.IntType):
-        if llty.width == 1:
-            ctypes.c_uint8.from_address(address).value = 1 if value else 0
-        else:
-            kind = {8: ctypes.c_int8, 16: ctypes.c_int16, 32: ctypes.c_int32, 64: ctypes.c_int64}[llty.width]
-            kind.from_address(address).value = value
-    elif isinstance(llty, ir.DoubleType):
-        ctypes.c_double.from_address(address).value = value
-    elif isinstance(llty, ir.FloatType):
-        ctypes.c_float.from_address(address).value = value
-    elif isinstance(llty, ir.PointerType):
-        ctypes.c_void_p.from_address(address).value = value or None
-    elif isinstance(llty, (ir.LiteralStructType, ir.ArrayType)):
-        elements = llty.elements if isinstance(llty, ir.LiteralStructType) else [llty.element] * llty.count
-        if isinstance(llty, ir.LiteralStructType) and llty.packed:
+def _place(llty: ir.Type, base: int, leaves: list[tuple[int, str]], data: Any) -> None:
+    """Append the (offset, struct code) of every scalar of ``llty`` placed at ``base``."""
+    if isinstance(llty, ir.LiteralStructType):
+        if llty.packed:
             raise TypeError("packed_value: packed structs are not laid out")
         offset = 0
-        for element, item in zip(elements, value, strict=True):
-            align = element.get_abi_alignment(data)
+        for element in llty.elements:
+            size, align = _abi(element, data)
             offset = -(-offset // align) * align
-            _write(address + offset, element, item, data)
-            offset += element.get_abi_size(data)
+            _place(element, base + offset, leaves, data)
+            offset += size
+    elif isinstance(llty, ir.ArrayType):
+        size = _abi(llty.element, data)[0]
+        for i in range(llty.count):
+            _place(llty.element, base + i * size, leaves, data)
+    elif isinstance(llty, ir.IntType) and llty.width in (1, 8, 16, 32, 64):
+        leaves.append((base, {1: "B", 8: "b", 16: "h", 32: "i", 64: "q"}[llty.width]))
+    elif isinstance(llty, ir.DoubleType):
+        leaves.append((base, "d"))
+    elif isinstance(llty, ir.FloatType):
+        leaves.append((base, "f"))
+    elif isinstance(llty, ir.PointerType):
+        leaves.append((base, "Q"))
     else:
-        raise TypeError(f"packed_value: cannot write LLVM type {llty}")
+        raise TypeError(f"packed_value: cannot lay out LLVM type {llty}")
+
+
+def _abi(llty: ir.Type, data: Any) -> tuple[int, int]:
+    """(size, alignment) of ``llty`` on this target. Asking llvmlite parses IR each time (about
+    0.1 ms: 45-60 ms for a plan), so it is asked once per scalar or pointer type; structs and
+    arrays follow LLVM's layout of them (each member at its alignment, the struct as aligned as
+    its most aligned member and its size a multiple of that; an array's elements back to back)."""
+    if isinstance(llty, ir.LiteralStructType):
+        offset, align = 0, 1
+        for element in llty.elements:
+            size, a = _abi(element, data)
+            offset = -(-offset // a) * a + size
+            align = max(align, a)
+        return -(-offset // align) * align, align
+    if isinstance(llty, ir.ArrayType):
+        size, align = _abi(llty.element, data)
+        return size * llty.count, align
+    key = str(llty)
+    known = _LEAVES.get(key)
+    if known is None:
+        known = _LEAVES[key] = (llty.get_abi_size(data), llty.get_abi_alignment(data))
+    return known
+
+
+def _native_fields(value: Any, ty: types.Type) -> list:
+    """``value``'s scalars in the order of Numba's value model (:func:`_place`'s order)."""
+    if isinstance(ty, types.BaseTuple):
+        return [x for v, t in zip(value, ty.types, strict=True) for x in _native_fields(v, t)]
+    if isinstance(ty, types.Array):
+        # the array model: meminfo, parent (none: detached), nitems, itemsize, data, shape, strides
+        return [0, 0, value.size, value.itemsize, value.ctypes.data, *value.shape, *value.strides]
+    if isinstance(ty, types.Boolean):
+        return [1 if value else 0]
+    if isinstance(ty, types.Integer):
+        return [int(value)]
+    if isinstance(ty, types.Float):
+        return [float(value)]
+    if isinstance(ty, types.NoneType):
+        return [0]  # (an opaque pointer: a pass the plan does not use)
+    raise TypeError(f"packed_value: cannot lay out a {ty}")
 
 
 @intrinsic
