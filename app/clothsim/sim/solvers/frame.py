@@ -328,7 +328,7 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         return Addresses(native_address(_member, member),
                          0 if repel is None else native_address(repel_slots, repel),
                          0 if collide is None else native_address(collide_meshes_chunk, collide),
-                         native_address(_enter, enter), native_address(_launch, launch), calls,
+                         native_address(_enter, enter), calls,
                          tuple(tuple(native_address(*kernel) for kernel in row) for row in kinds),
                          (*(native_address(*kernel) for kernel in sets), 0) if sets else ())
 
@@ -363,8 +363,6 @@ class Addresses(NamedTuple):
     collide: int
     #: :func:`_enter` compiled for the plan's type
     enter: int
-    #: :func:`_launch` (one for every plan)
-    launch: int
     #: the passes called by address (``ClothState.calls``, ``CALL_*``)
     calls: tuple[int, ...]
     #: each kind's collider passes (``Colliders.calls``, a row per kind: :data:`~clothsim.sim.passes.colliders.KIND_CALLS`; empty without colliders)
