@@ -13,8 +13,8 @@ from clothsim.errors import SceneError
 from clothsim.meshcollider import rotation_matrix
 from clothsim.objfile import ObjError, parse_obj
 from clothsim.objshapes import TORUS, box_obj, torus_obj
-from clothsim.sim.passes.colliders.mesh import mesh_targets
-from clothsim.sim.passes.colliders.meshgrid import mesh_group
+from clothsim.sim.passes.colliders.mesh import closest_on_triangle, mesh_targets
+from clothsim.sim.passes.colliders.meshgrid import INFO_NEAR, INFO_NEAR_OK, mesh_group
 
 from conftest import SCENES, error_line
 
@@ -194,6 +194,31 @@ def test_each_points_list_gives_the_brute_force_contacts_as_the_points_move(tmp_
         assert too_many.sum() > n // 4
     else:
         assert listed.sum() > n // 2
+
+
+@pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both
+def test_each_list_is_nearest_first_with_each_triangles_distance_from_its_anchor(tmp_path):
+    # The pass reads a list only while a triangle's distance from the anchor (less the slack),
+    # less the point's from it, is within r: the distances must be those of the triangles, in order.
+    text = _scene(tmp_path, torus_obj(*TORUS), {"path": "shape.obj", "translate": [0.5, 0.3, 0.5], "friction": 0.3},
+                  cloth=_cloth(30))
+    group = mesh_group(load_scene(text))
+    rng = np.random.default_rng(5)
+    pos = _near_surface(group, rng, 900, 1.5 * THICKNESS)
+    mesh_targets(pos, pos, group, False)
+    listed = np.flatnonzero(group.near_n[0] > 1)
+    assert listed.size > 300, listed.size
+    slack = group.info[0, INFO_NEAR] - group.info[0, INFO_NEAR_OK]
+    for p in listed[:80]:
+        k = group.near_n[0, p]
+        tris, dist = group.near_tris[0, p, :k], group.near_d[0, p, :k]
+        assert np.all(np.diff(dist) >= 0.0)
+        a = group.near_at[0, p]
+        exact = [np.linalg.norm(a - np.array(closest_on_triangle(*a, *group.verts[group.tris[t]].reshape(-1))[:3]))
+                 for t in tris]
+        assert np.allclose(dist, np.array(exact) - slack, rtol=0.0, atol=1e-12)
+    # most lists hold triangles the pass need not read at the anchor itself: the order matters
+    assert np.mean(group.near_d[0, listed, 0] > THICKNESS) > 0.2
 
 
 @pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both

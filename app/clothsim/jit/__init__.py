@@ -39,6 +39,14 @@ KERNEL = {"cache": True, "fastmath": FASTMATH, "error_model": "numpy"}
 #: numbers changing between a cold and a warm run).
 EXACT = {"cache": True, "error_model": "numpy", "fastmath": False}
 
+#: EXACT for kernels that only read and write the arrays they are given (they make none and
+#: return none): compiled without Numba's reference counting (its private ``_nrt`` option). Each
+#: time an inlined helper takes a group of arrays, Numba counts a reference to every array of the
+#: group up and down again, two calls per array, and in the mesh pass those calls cost more than
+#: the tests themselves. A callee that does not set the option inherits it, so every non-inlined
+#: callee of such a kernel that takes arrays must be BORROWED too.
+BORROWED = {**EXACT, "_nrt": False}
+
 #: KERNEL split over the cores with ``prange``; such kernels keep every output element a
 #: function of its own inputs, so results do not depend on the number of threads.
 PARALLEL = {**KERNEL, "parallel": True}

@@ -430,8 +430,11 @@ def missing_private_api() -> list[str]:
     """The private Numba names this module needs that the installed Numba lacks (empty when all
     are there)."""
     from numba.core.callconv import CPUCallConv
+    from numba.core.cpu import CPUTargetOptions
 
     missing = []
+    if not hasattr(CPUTargetOptions, "_nrt"):
+        missing.append("numba.core.cpu.CPUTargetOptions._nrt (the jit option BORROWED)")
     if getattr(caching, "CacheImpl", None) is None and getattr(caching, "_CacheImpl", None) is None:
         missing.append("numba.core.caching.CacheImpl (or _CacheImpl)")
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)

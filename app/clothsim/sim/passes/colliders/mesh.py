@@ -32,7 +32,16 @@ substep reads a few triangles in a row. A point that left its reach gathers its 
 the grid (:mod:`~clothsim.sim.passes.colliders.meshgrid`); one whose r exceeds the reach (a fast
 point), or whose list would hold more than ``NEAR_ROOM`` triangles, asks the grid for this
 substep's. The lists are a cache of where each point is, not of its history: whichever way a
-point's triangles were found, they include every one within r of it. Ties between triangles are
+point's triangles were found, they include every one within r of it.
+
+A list is kept nearest first, each triangle with its distance from the anchor (less the list's
+slack): its distance from q is at least that less |q - anchor|, so a substep reads the list
+only while that bound is within r, and a point whose nearest listed triangle is out of reach
+(most of a draped cloth, resting a little further than the thickness from the mesh, or hanging
+clear of it) is passed over before its list is read, as is one further than r from the mesh's
+box: in that first test the lengths are bounded from above by their sums of components (no
+square root). What is passed over could neither come within r nor be crossed, so no answer
+changes. Ties between triangles are
 broken by the lower triangle index, so the answer does not depend on the order triangles come in,
 and equals the brute-force one (:func:`mesh_targets`) bit for bit. Each point's list is written
 only by the work item that owns the point.
@@ -48,13 +57,16 @@ import numba
 import numpy as np
 from numba import njit, types
 
-from ....jit import CHUNKS, EXACT, KERNEL
+from ....jit import BORROWED, CHUNKS, EXACT, KERNEL
 from ....jit.internals import call_native, native_address
 from ...clock import substep_time
 from .moving import Tracks, track_ends
 from .meshgrid import MeshGroup, mesh_group, DIMS_CELL0, DIMS_CLOSED, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
     INFO_HI, INFO_INV_H, INFO_LO, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK
 from ...team import share
+
+#: How much longer than a sum of absolute components the early test takes a length to be.
+_LONGER = 1.0 + 1e-9
 
 # closest-point features
 FACE, VERTEX_A, VERTEX_B, VERTEX_C, EDGE_AB, EDGE_BC, EDGE_CA = 0, 1, 2, 3, 4, 5, 6
@@ -242,12 +254,14 @@ def _grid_range(mesh: tuple, m: int, qx: float, qy: float, qz: float, reach: flo
             _cell(qz - e, info[m, INFO_LO + 2], inv_h, nz), _cell(qz + e, info[m, INFO_LO + 2], inv_h, nz))
 
 
-@njit(**EXACT)
+@njit(**BORROWED)
 def gather_near(mesh: tuple, m: int, p: int, qx: float, qy: float, qz: float) -> int:
     """Point ``p``'s list of mesh ``m``: every triangle whose box comes within the list's reach
-    (``INFO_NEAR``) of q, each once, into ``near_tris[m, p]``; returns their number, or -1 when
-    there are more than a list holds (the point then asks the grid every substep)."""
-    reach = mesh.info[m, INFO_NEAR]
+    (``INFO_NEAR``) of q, each once, into ``near_tris[m, p]``, nearest first, with its distance
+    from q less the listing's slack in ``near_d[m, p]``; returns their number, or -1 when there
+    are more than a list holds (the point then asks the grid every substep)."""
+    info = mesh.info
+    reach = info[m, INFO_NEAR]
     x0, x1, y0, y1, z0, z1 = _grid_range(mesh, m, qx, qy, qz, reach)
     nx, ny = mesh.dims[m, DIMS_N], mesh.dims[m, DIMS_N + 1]
     base = mesh.dims[m, DIMS_CELL0]
@@ -274,10 +288,31 @@ def gather_near(mesh: tuple, m: int, p: int, qx: float, qy: float, qz: float) ->
                                 return -1
                             near[m, p, count] = t
                             count += 1
+    # Each triangle's distance from the anchor bounds its distance from any later q from below
+    # (less |q - anchor|), so a substep reads the list only as far as that bound is within r.
+    # The slack (the list's own, far beyond the rounding of either distance) keeps the bound
+    # below the distance the tests would compute.
+    slack = reach - info[m, INFO_NEAR_OK]
+    dist = mesh.near_d
+    verts = mesh.verts
+    tris = mesh.tris
+    for j in range(count):
+        t = near[m, p, j]
+        a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
+        px, py, pz, _ = closest_on_triangle(qx, qy, qz, verts[a, 0], verts[a, 1], verts[a, 2], verts[b, 0],
+                                            verts[b, 1], verts[b, 2], verts[c, 0], verts[c, 1], verts[c, 2])
+        d = math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2) - slack
+        i = j
+        while i > 0 and dist[m, p, i - 1] > d:  # insertion sort: a list holds a few triangles
+            dist[m, p, i] = dist[m, p, i - 1]
+            near[m, p, i] = near[m, p, i - 1]
+            i -= 1
+        dist[m, p, i] = d
+        near[m, p, i] = t
     return count
 
 
-@njit(**EXACT)
+@njit(**BORROWED)
 def _brute_fold(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, r: float
                 ) -> tuple[float, float, float, float, int, int, float, int]:
     """The fold (:func:`_fold`) over every triangle of mesh ``m``: the reference the tests hold the
@@ -293,7 +328,7 @@ def _brute_fold(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float,
     return bd2, bpx, bpy, bpz, bt, bf, bs, bh
 
 
-@njit(**EXACT)
+@njit(**BORROWED)
 def _grid_fold(mesh: tuple, m: int, lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, r: float
                ) -> tuple[float, float, float, float, int, int, float, int]:
     """The fold (:func:`_fold`) over the triangles the grid lists near q: for a point without a
@@ -336,24 +371,33 @@ def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, 
     # The point's own list (see the module's docstring) holds every triangle within the list's
     # reach of its anchor, so it holds every one within r of q while q has moved less than
     # reach - r (per axis) from the anchor; else it is gathered afresh at q, if r leaves room.
+    # Read in order of distance from the anchor, it is read only while a triangle's distance from
+    # the anchor, less the point's from it, can be within r.
     count = -1
+    moved = 0.0
     near_n = mesh.near_n
     if p < near_n.shape[1] and not brute:
         limit = info[m, INFO_NEAR_OK]
         if r <= limit:
             at = mesh.near_at
-            d = max(abs(qx - at[m, p, 0]), abs(qy - at[m, p, 1]), abs(qz - at[m, p, 2]))
+            ex, ey, ez = qx - at[m, p, 0], qy - at[m, p, 1], qz - at[m, p, 2]
             count = near_n[m, p]
-            if not d + r <= limit:
+            if max(abs(ex), abs(ey), abs(ez)) + r <= limit:
+                moved = math.sqrt(ex * ex + ey * ey + ez * ez)
+            else:
                 count = gather_near(mesh, m, p, qx, qy, qz)
                 near_n[m, p] = count
                 at[m, p, 0], at[m, p, 1], at[m, p, 2] = qx, qy, qz
     if count >= 0:
         tbox = mesh.tbox
         near = mesh.near_tris
+        dist = mesh.near_d
+        within = r + moved
         r2 = r * r
         bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
         for j in range(count):
+            if dist[m, p, j] > within:
+                break
             t = np.int64(near[m, p, j])
             if not _far(tbox, t, qx, qy, qz, r):
                 d2, px, py, pz, f, s = tri_test(mesh.verts, mesh.tris, mesh.fnorm, t, lx, ly, lz, qx, qy, qz, r)
@@ -366,7 +410,7 @@ def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, 
     return resolve(mesh, m, lx, ly, lz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
 
 
-@njit(**EXACT)
+@njit(**BORROWED)
 def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple, m: int,
                         before: np.ndarray, after: np.ndarray, brute: bool) -> None:
     """Collide the points ``free`` with mesh ``m`` translated by ``before`` at the substep's start
@@ -374,17 +418,40 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
     keep = 1.0 - mesh.info[m, INFO_FRICTION]
     bx, by, bz = before[0], before[1], before[2]
     ax, ay, az = after[0], after[1], after[2]
+    th = mesh.thickness
+    limit = mesh.info[m, INFO_NEAR_OK]
+    near_n = mesh.near_n
+    at = mesh.near_at
+    dist = mesh.near_d
+    listed = 0 if brute else near_n.shape[1]
+    info = mesh.info
+    x0, y0, z0 = info[m, INFO_LO], info[m, INFO_LO + 1], info[m, INFO_LO + 2]
+    x1, y1, z1 = info[m, INFO_HI], info[m, INFO_HI + 1], info[m, INFO_HI + 2]
     for k in range(free.shape[0]):
         p = free[k]
         lx, ly, lz = last[0, p] - bx, last[1, p] - by, last[2, p] - bz
-        hit, ox, oy, oz = point_contact(mesh, m, p, lx, ly, lz, pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az, brute)
+        qx, qy, qz = pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az
+        # Most points have nothing within r: they lie beyond r of the mesh's box, or their list
+        # is still valid and its nearest triangle, less how far the point is from the list's
+        # anchor, is beyond r. Lengths bounded from above here by their sums of components, made
+        # a little longer so that no rounding can bring them under the Euclidean ones (no
+        # square roots); what this does not rule out, point_contact works out exactly.
+        r1 = th + (abs(qx - lx) + abs(qy - ly) + abs(qz - lz)) * _LONGER
+        if (qx + r1 < x0 or qx - r1 > x1 or qy + r1 < y0 or qy - r1 > y1 or qz + r1 < z0 or qz - r1 > z1):
+            continue
+        if p < listed and near_n[m, p] >= 0:
+            ex, ey, ez = qx - at[m, p, 0], qy - at[m, p, 1], qz - at[m, p, 2]
+            if (max(abs(ex), abs(ey), abs(ez)) + r1 <= limit
+                    and (near_n[m, p] == 0 or dist[m, p, 0] > r1 + (abs(ex) + abs(ey) + abs(ez)) * _LONGER)):
+                continue
+        hit, ox, oy, oz = point_contact(mesh, m, p, lx, ly, lz, qx, qy, qz, brute)
         if hit:
             pos[0, p] = ax + lx + (ox - lx) * keep
             pos[1, p] = ay + ly + (oy - ly) * keep
             pos[2, p] = az + lz + (oz - lz) * keep
 
 
-@njit(**EXACT)
+@njit(**BORROWED)
 def collide_meshes_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple, on: np.ndarray,
                          c: int) -> None:
     """Work item ``c`` (of CHUNKS) of the mesh pass: the c-th part of the free points against
@@ -468,7 +535,7 @@ def _untracked(g: MeshGroup) -> MeshGroup:
     # the mesh pass reads the poses, never the tracks: without them its type is the same for a
     # moving mesh and a fixed one, so both run one compiled pass
     return MeshGroup(g.verts, g.tris, g.tbox, g.fnorm, g.enorm, g.vnorm, g.info, g.dims, g.cell_start, g.cell_tris,
-                     g.cell_box, g.near_at, g.near_n, g.near_tris, g.pose, g.thickness, g.on, None, g.collide)
+                     g.cell_box, g.near_at, g.near_n, g.near_tris, g.near_d, g.pose, g.thickness, g.on, None, g.collide)
 
 
 @njit(**EXACT)
