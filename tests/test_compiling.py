@@ -314,9 +314,9 @@ def test_every_kernel_says_its_floating_point_rules() -> None:
 
     from clothsim import jit
 
-    for options in (jit.KERNEL, jit.EXACT, jit.PARALLEL):
+    for options in (jit.KERNEL, jit.EXACT, jit.PARALLEL, jit.BORROWED):
         assert "fastmath" in options
-    allowed = {"KERNEL", "EXACT", "PARALLEL"}
+    allowed = {"KERNEL", "EXACT", "PARALLEL", "BORROWED"}
     for path in (Path(jit.__file__).parent.parent).rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text())):
             if isinstance(node, ast.Call) and getattr(node.func, "id", None) == "njit":
