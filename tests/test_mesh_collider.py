@@ -197,28 +197,47 @@ def test_each_points_list_gives_the_brute_force_contacts_as_the_points_move(tmp_
 
 
 @pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both
-def test_each_list_is_nearest_first_with_each_triangles_distance_from_its_anchor(tmp_path):
-    # The pass reads a list only while a triangle's distance from the anchor (less the slack),
-    # less the point's from it, is within r: the distances must be those of the triangles, in order.
+def test_each_list_is_nearest_first_with_each_triangles_distance_from_where_it_was_measured(tmp_path):
+    # The pass reads a list only while a triangle's distance from the list's reference point (less
+    # the slack), less the point's distance from it, is within r: the distances must be those of the
+    # triangles, in order, from that point: the anchor when the list is gathered, and where the
+    # point is once it has drifted REFRESH thicknesses from there (the list itself kept).
     text = _scene(tmp_path, torus_obj(*TORUS), {"path": "shape.obj", "translate": [0.5, 0.3, 0.5], "friction": 0.3},
                   cloth=_cloth(30))
     group = mesh_group(load_scene(text))
     rng = np.random.default_rng(5)
     pos = _near_surface(group, rng, 900, 1.5 * THICKNESS)
+    slack = group.info[0, INFO_NEAR] - group.info[0, INFO_NEAR_OK]
+    shift = group.pose[0, :3]
+
+    def check(points):
+        for p in points:
+            k = group.near_n[0, p]
+            tris, dist = group.near_tris[0, p, :k], group.near_d[0, p, :k]
+            assert np.all(np.diff(dist) >= 0.0)
+            ref = group.near_ref[0, p]
+            exact = [np.linalg.norm(ref - np.array(closest_on_triangle(*ref, *group.verts[group.tris[t]].reshape(-1))[:3]))
+                     for t in tris]
+            assert np.allclose(dist, np.array(exact) - slack, rtol=0.0, atol=1e-12)
+
     mesh_targets(pos, pos, group, False)
     listed = np.flatnonzero(group.near_n[0] > 1)
     assert listed.size > 300, listed.size
-    slack = group.info[0, INFO_NEAR] - group.info[0, INFO_NEAR_OK]
-    for p in listed[:80]:
-        k = group.near_n[0, p]
-        tris, dist = group.near_tris[0, p, :k], group.near_d[0, p, :k]
-        assert np.all(np.diff(dist) >= 0.0)
-        a = group.near_at[0, p]
-        exact = [np.linalg.norm(a - np.array(closest_on_triangle(*a, *group.verts[group.tris[t]].reshape(-1))[:3]))
-                 for t in tris]
-        assert np.allclose(dist, np.array(exact) - slack, rtol=0.0, atol=1e-12)
-    # most lists hold triangles the pass need not read at the anchor itself: the order matters
+    assert np.array_equal(group.near_ref[0, listed], group.near_at[0, listed])
+    check(listed[:80])
+    # most lists hold triangles the pass need not read at the reference itself: the order matters
     assert np.mean(group.near_d[0, listed, 0] > THICKNESS) > 0.2
+    # a drift of 0.25 thicknesses along the normal keeps the lists and measures them again
+    anchors = group.near_at.copy()
+    step = 0.25 * THICKNESS * group.fnorm[group.near_tris[0, :, 0]].T
+    moved = pos + step
+    mesh_targets(moved, moved, group, False)
+    kept = listed[np.all(group.near_at[0, listed] == anchors[0, listed], axis=1)]
+    assert kept.size > 100, kept.size
+    remeasured = kept[np.all(group.near_ref[0, kept] != anchors[0, kept], axis=1)]
+    assert remeasured.size > 50, remeasured.size
+    assert np.allclose(group.near_ref[0, remeasured], (moved[:, remeasured] - shift[:, None]).T, rtol=0.0, atol=0.0)
+    check(remeasured[:80])
 
 
 @pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both

@@ -34,17 +34,19 @@ point), or whose list would hold more than ``NEAR_ROOM`` triangles, asks the gri
 substep's. The lists are a cache of where each point is, not of its history: whichever way a
 point's triangles were found, they include every one within r of it.
 
-A list is kept nearest first, each triangle with its distance from the anchor (less the list's
-slack): its distance from q is at least that less |q - anchor|, so a substep reads the list
-only while that bound is within r, and a point whose nearest listed triangle is out of reach
-(most of a draped cloth, resting a little further than the thickness from the mesh, or hanging
-clear of it) is passed over before its list is read, as is one further than r from the mesh's
-box: in that first test the lengths are bounded from above by their sums of components (no
-square root). What is passed over could neither come within r nor be crossed, so no answer
-changes. Ties between triangles are
-broken by the lower triangle index, so the answer does not depend on the order triangles come in,
-and equals the brute-force one (:func:`mesh_targets`) bit for bit. Each point's list is written
-only by the work item that owns the point.
+A list is kept nearest first, each triangle with its distance from a reference point (less the
+list's slack): its distance from q is at least that less |q - reference|, so a substep reads the
+list only while that bound is within r. The reference is the anchor when the list is gathered,
+and where the point is once it has drifted ``REFRESH`` thicknesses from it (the distances are
+measured again and the list kept: the drift would otherwise admit ever more of it). A point whose
+nearest listed triangle is out of reach by that bound (one hanging clear of the mesh, say) is
+passed over before its list is read, as is one further than r from the mesh's box; in that first
+test the lengths are bounded from above by their sums of components (no square root). What is
+passed over could neither come within r nor be crossed, so no answer changes.
+
+Ties between triangles are broken by the lower triangle index, so the answer does not depend on
+the order triangles come in, and equals the brute-force one (:func:`mesh_targets`) bit for bit.
+Each point's list is written only by the work item that owns the point.
 """
 
 from __future__ import annotations
@@ -65,6 +67,9 @@ from .meshgrid import MeshGroup, mesh_group, DIMS_CELL0, DIMS_CLOSED, DIMS_N, DI
     INFO_HI, INFO_INV_H, INFO_LO, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK
 from ...team import share
 
+#: How far (in thicknesses) a point may drift from where its list's distances were measured
+#: before they are measured again from where it is (see the module's docstring).
+REFRESH = 0.2
 #: How much longer than a sum of absolute components the early test takes a length to be.
 _LONGER = 1.0 + 1e-9
 
@@ -288,11 +293,22 @@ def gather_near(mesh: tuple, m: int, p: int, qx: float, qy: float, qz: float) ->
                                 return -1
                             near[m, p, count] = t
                             count += 1
-    # Each triangle's distance from the anchor bounds its distance from any later q from below
-    # (less |q - anchor|), so a substep reads the list only as far as that bound is within r.
+    measure_list(mesh, m, p, count, qx, qy, qz)
+    return count
+
+
+@njit(**BORROWED)
+def measure_list(mesh: tuple, m: int, p: int, count: int, qx: float, qy: float, qz: float) -> None:
+    """Point ``p``'s list of mesh ``m`` (``count`` triangles) sorted nearest first from q, each
+    triangle's distance from q, less the list's slack, in ``near_d[m, p]``; q becomes the list's
+    reference, ``near_ref[m, p]``."""
+    # A triangle's distance from the reference bounds its distance from any later q from below
+    # (less |q - reference|), so a substep reads the list only as far as that bound is within r.
     # The slack (the list's own, far beyond the rounding of either distance) keeps the bound
     # below the distance the tests would compute.
-    slack = reach - info[m, INFO_NEAR_OK]
+    info = mesh.info
+    slack = info[m, INFO_NEAR] - info[m, INFO_NEAR_OK]
+    near = mesh.near_tris
     dist = mesh.near_d
     verts = mesh.verts
     tris = mesh.tris
@@ -309,7 +325,8 @@ def gather_near(mesh: tuple, m: int, p: int, qx: float, qy: float, qz: float) ->
             i -= 1
         dist[m, p, i] = d
         near[m, p, i] = t
-    return count
+    ref = mesh.near_ref
+    ref[m, p, 0], ref[m, p, 1], ref[m, p, 2] = qx, qy, qz
 
 
 @njit(**BORROWED)
@@ -383,7 +400,13 @@ def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, 
             ex, ey, ez = qx - at[m, p, 0], qy - at[m, p, 1], qz - at[m, p, 2]
             count = near_n[m, p]
             if max(abs(ex), abs(ey), abs(ez)) + r <= limit:
-                moved = math.sqrt(ex * ex + ey * ey + ez * ez)
+                ref = mesh.near_ref
+                fx, fy, fz = qx - ref[m, p, 0], qy - ref[m, p, 1], qz - ref[m, p, 2]
+                moved = math.sqrt(fx * fx + fy * fy + fz * fz)
+                if moved > REFRESH * mesh.thickness:
+                    # the bound's drift term admits ever more of the list: measured again from here
+                    measure_list(mesh, m, p, count, qx, qy, qz)
+                    moved = 0.0
             else:
                 count = gather_near(mesh, m, p, qx, qy, qz)
                 near_n[m, p] = count
@@ -422,6 +445,7 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
     limit = mesh.info[m, INFO_NEAR_OK]
     near_n = mesh.near_n
     at = mesh.near_at
+    ref = mesh.near_ref
     dist = mesh.near_d
     listed = 0 if brute else near_n.shape[1]
     info = mesh.info
@@ -441,9 +465,12 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
             continue
         if p < listed and near_n[m, p] >= 0:
             ex, ey, ez = qx - at[m, p, 0], qy - at[m, p, 1], qz - at[m, p, 2]
-            if (max(abs(ex), abs(ey), abs(ez)) + r1 <= limit
-                    and (near_n[m, p] == 0 or dist[m, p, 0] > r1 + (abs(ex) + abs(ey) + abs(ez)) * _LONGER)):
-                continue
+            if max(abs(ex), abs(ey), abs(ez)) + r1 <= limit:
+                if near_n[m, p] == 0:
+                    continue
+                fx, fy, fz = qx - ref[m, p, 0], qy - ref[m, p, 1], qz - ref[m, p, 2]
+                if dist[m, p, 0] > r1 + (abs(fx) + abs(fy) + abs(fz)) * _LONGER:
+                    continue
         hit, ox, oy, oz = point_contact(mesh, m, p, lx, ly, lz, qx, qy, qz, brute)
         if hit:
             pos[0, p] = ax + lx + (ox - lx) * keep
@@ -535,7 +562,7 @@ def _untracked(g: MeshGroup) -> MeshGroup:
     # the mesh pass reads the poses, never the tracks: without them its type is the same for a
     # moving mesh and a fixed one, so both run one compiled pass
     return MeshGroup(g.verts, g.tris, g.tbox, g.fnorm, g.enorm, g.vnorm, g.info, g.dims, g.cell_start, g.cell_tris,
-                     g.cell_box, g.near_at, g.near_n, g.near_tris, g.near_d, g.pose, g.thickness, g.on, None, g.collide)
+                     g.cell_box, g.near_at, g.near_n, g.near_tris, g.near_d, g.near_ref, g.pose, g.thickness, g.on, None, g.collide)
 
 
 @njit(**EXACT)

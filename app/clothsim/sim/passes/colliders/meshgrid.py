@@ -67,7 +67,8 @@ class MeshGroup(NamedTuple):
     near_at: np.ndarray  # (M, N, 3) each point's anchor, where its list of each mesh was gathered (mesh frame)
     near_n: np.ndarray  # (M, N) int64 triangles in that list; -1: none (too many, or never gathered)
     near_tris: np.ndarray  # (M, N, NEAR_ROOM) int32 the list: every triangle whose box comes within reach
-    near_d: np.ndarray  # (M, N, NEAR_ROOM) each listed triangle's distance from the anchor, less a slack; ascending
+    near_d: np.ndarray  # (M, N, NEAR_ROOM) each listed triangle's distance from near_ref, less a slack; ascending
+    near_ref: np.ndarray  # (M, N, 3) where those distances were measured (mesh frame)
     pose: np.ndarray  # (M, 6) translation at the substep's start and at its end
     thickness: float
     on: np.ndarray  # (M,) bool: the reach flags
@@ -206,7 +207,8 @@ def mesh_group(scene: Scene, clock: np.ndarray | None = None, dt: float = 0.0) -
                      cell_tris, np.ascontiguousarray(tbox[cell_tris]), np.full((len(scene.meshes), n_points, 3), np.inf),
                      np.full((len(scene.meshes), n_points), -1, dtype=np.int64),
                      np.zeros((len(scene.meshes), n_points, NEAR_ROOM), dtype=np.int32),
-                     np.zeros((len(scene.meshes), n_points, NEAR_ROOM)), pose, float(thickness),
+                     np.zeros((len(scene.meshes), n_points, NEAR_ROOM)), np.zeros((len(scene.meshes), n_points, 3)),
+                     pose, float(thickness),
                      np.zeros(len(scene.meshes), dtype=np.bool_),
                      None if clock is None else pack_tracks(scene.meshes, clock, dt))
 
