@@ -388,8 +388,8 @@ def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, 
     # The point's own list (see the module's docstring) holds every triangle within the list's
     # reach of its anchor, so it holds every one within r of q while q has moved less than
     # reach - r (per axis) from the anchor; else it is gathered afresh at q, if r leaves room.
-    # Read in order of distance from the anchor, it is read only while a triangle's distance from
-    # the anchor, less the point's from it, can be within r.
+    # Read in order of distance from the list's reference point, it is read only while a
+    # triangle's distance from the reference, less the point's from it, can be within r.
     count = -1
     moved = 0.0
     near_n = mesh.near_n
@@ -457,7 +457,7 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
         qx, qy, qz = pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az
         # Most points have nothing within r: they lie beyond r of the mesh's box, or their list
         # is still valid and its nearest triangle, less how far the point is from the list's
-        # anchor, is beyond r. Lengths bounded from above here by their sums of components, made
+        # reference point, is beyond r. Lengths bounded from above here by their sums of components, made
         # a little longer so that no rounding can bring them under the Euclidean ones (no
         # square roots); what this does not rule out, point_contact works out exactly.
         r1 = th + (abs(qx - lx) + abs(qy - ly) + abs(qz - lz)) * _LONGER
