@@ -459,3 +459,19 @@ def test_the_collider_bench_times_the_mesh_scene_without_its_mesh_and_with_a_fin
     fine = fine_mesh(scene).meshes[0]
     assert fine.closed and fine.triangles.shape == (20000, 3) and fine.translate == scene.meshes[0].translate
     assert np.ptp(fine.vertices, axis=0) == pytest.approx(np.ptp(scene.meshes[0].vertices, axis=0), rel=0.01)
+
+
+def test_the_memory_check_counts_each_meshs_lists_per_point(tmp_path, monkeypatch):
+    # a mesh keeps a list of near triangles for every cloth point: the check must count it
+    import clothsim.scene as scene_module
+    from clothsim.meshcollider import MESH_BYTES_PER_POINT
+    from clothsim.scene import BYTES_PER_POINT
+
+    mesh = {"path": "shape.obj", "translate": [0.5, 0.3, 0.5], "friction": 0.3}
+    group = mesh_group(load_scene(_scene(tmp_path, torus_obj(*TORUS), mesh, cloth=_cloth(30))))
+    lists = (group.near_at, group.near_n, group.near_tris, group.near_d, group.near_ref)
+    assert MESH_BYTES_PER_POINT >= 1.25 * sum(a.nbytes for a in lists) / 900
+    monkeypatch.setattr(scene_module, "available_memory", lambda: 900 * BYTES_PER_POINT + 100)
+    load_scene(_scene(tmp_path, torus_obj(*TORUS), None, cloth=_cloth(30)))  # fits without the mesh
+    with pytest.raises(SceneError, match="30x30 grid would need about"):
+        load_scene(_scene(tmp_path, torus_obj(*TORUS), mesh, cloth=_cloth(30)))

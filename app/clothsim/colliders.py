@@ -19,7 +19,7 @@ from dataclasses import dataclass, fields
 from typing import Any, Callable
 
 from . import validate as V
-from .meshcollider import MESH
+from .meshcollider import MESH, MESH_BYTES_PER_POINT
 from .motion import MOTION, MotionSpec
 
 #: Bounds of every length a scene gives (the cloth's sides, a collider's sizes): far beyond any
@@ -174,6 +174,8 @@ class ColliderKind:
     to_json: Callable[[Any], dict[str, Any]]
     #: its pass module in clothsim.sim.passes.colliders
     pass_module: str
+    #: bytes per cloth point its pass adds, given the scene's specs of the kind (for the memory check)
+    bytes_per_point: Callable[[tuple], int] = lambda specs: 0
 
 
 def _spec_rule(record: V.Rule, spec: type) -> V.Rule:
@@ -186,7 +188,8 @@ KINDS: tuple[ColliderKind, ...] = (
     ColliderKind("plane", "planes", _spec_rule(PLANE, PlaneSpec), collider_json, "plane"),
     ColliderKind("capsule", "capsules", _spec_rule(CAPSULE, CapsuleSpec), collider_json, "capsule"),
     ColliderKind("box", "boxes", _spec_rule(BOX, BoxSpec), collider_json, "box"),
-    ColliderKind("mesh", "meshes", MESH, lambda spec: spec.as_json(), "mesh"),
+    ColliderKind("mesh", "meshes", MESH, lambda spec: spec.as_json(), "mesh",
+                 lambda specs: len(specs) * MESH_BYTES_PER_POINT),
 )
 #: The kinds by scene-file key.
 BY_KEY: dict[str, ColliderKind] = {k.key: k for k in KINDS}

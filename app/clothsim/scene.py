@@ -199,7 +199,7 @@ def scene_from_dict(data: Any, path: str = "<scene>", files: Any = None) -> Scen
     values = SCENE(data, V.At(path, files=files))
     cloth = ClothSpec(**values["cloth"])
     forces = {kind.attr: values[kind.attr] for kind in FORCES}
-    _check_memory(cloth, values["simulation"], path, forces)
+    _check_memory(cloth, values["simulation"], path, forces, {kind.attr: values[kind.attr] for kind in KINDS})
     return Scene(cloth=cloth, simulation=values["simulation"], render=values["render"], path=path,
                  **{kind.attr: values[kind.attr] for kind in KINDS}, **forces)
 
@@ -421,11 +421,14 @@ def bytes_per_point(simulation: SimulationSpec) -> int:
 
 def check_memory(scene: Scene) -> None:
     """Refuse (SceneError naming the grid size) a scene whose run would not fit in memory."""
-    _check_memory(scene.cloth, scene.simulation, scene.path, {kind.attr: getattr(scene, kind.attr) for kind in FORCES})
+    _check_memory(scene.cloth, scene.simulation, scene.path, {kind.attr: getattr(scene, kind.attr) for kind in FORCES},
+                  {kind.attr: getattr(scene, kind.attr) for kind in KINDS})
 
 
-def _check_memory(cloth: ClothSpec, simulation: SimulationSpec, path: str, forces: dict[str, tuple]) -> None:
-    extra = sum(kind.bytes_per_point(forces[kind.attr]) for kind in FORCES)
+def _check_memory(cloth: ClothSpec, simulation: SimulationSpec, path: str, forces: dict[str, tuple],
+                  colliders: dict[str, tuple]) -> None:
+    extra = (sum(kind.bytes_per_point(forces[kind.attr]) for kind in FORCES)
+             + sum(kind.bytes_per_point(colliders[kind.attr]) for kind in KINDS))
     need = cloth.num_points * (bytes_per_point(simulation) + extra)
     avail = available_memory()
     if need > avail:

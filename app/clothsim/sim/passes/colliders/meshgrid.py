@@ -30,6 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ....meshcollider import NEAR_ROOM
 from ....scene import Scene
 from ...clock import track_at
 from .moving import Tracks, pack_tracks
@@ -45,8 +46,6 @@ LISTING_SLACK = 1e-9
 #: A point's list reaches this many thicknesses from its anchor: the wider, the longer a moving
 #: point keeps its list, the more triangles in it.
 NEAR_REACH = 1.5
-#: Most triangles a point's list holds (more: that point asks the grid, every substep).
-NEAR_ROOM = 64
 
 
 class MeshGroup(NamedTuple):
