@@ -13,6 +13,7 @@ import warnings
 from pathlib import Path
 
 import numba
+from numba import njit
 import numpy as np
 import pytest
 
@@ -22,7 +23,9 @@ from clothsim.sim import Simulation
 from clothsim.sim.profile import Profiler
 from clothsim.sim.solvers.frame import PASS_ALL
 
+from clothsim.jit import KERNEL
 from clothsim.sim.crossings import count_crossings
+from clothsim.sim.passes.contact import _edge_edge, _point_triangle
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
 INTEGRATIONS = [("verlet", "spec"), ("verlet", "rate"), ("symplectic_euler", "spec"), ("implicit_euler", "spec"),
@@ -190,3 +193,71 @@ def test_fused_frame_matches_pass_by_pass_profile() -> None:
         profiler.frame()
     assert np.array_equal(fused.positions, profiled.positions)
     assert profiler.calls["contact bound"] == 40 * scene.simulation.simulation_steps
+
+
+def test_no_pair_is_held_closer_than_the_floor() -> None:
+    # Two triangles, the upper one driven straight down onto the lower one, still, at every
+    # rebuild: the gap shrinks by GAMMA x (gap - floor) each time, towards FLOOR x the contact
+    # distance and never below it (without the floor: 0.02 x 0.55^60, 5e-18 m).
+    from clothsim.sim.passes.contact import FLOOR, GAMMA, bound, contact_group, rebuild
+
+    lower = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    upper = [[0.1, 0.1, 0.02], [1.1, 0.1, 0.02], [0.1, 1.1, 0.02]]
+    x = np.ascontiguousarray(np.array(lower + upper).T)
+    c = contact_group(x, np.array([[0, 3], [1, 4], [2, 5]]), np.ones(6, dtype=np.bool_), 0.05)
+    floor = FLOOR * c.thickness
+    gaps = []
+    for _ in range(60):
+        rebuild(x, c)
+        x[2, 3:] = -1.0
+        bound(x, c)
+        gaps.append(float(x[2, 3:].min() - x[2, :3].max()))
+    assert gaps[0] == pytest.approx(0.02 - GAMMA * (0.02 - floor), rel=1e-8)
+    assert all(b < a for a, b in zip(gaps, gaps[1:]) if a > 2 * floor)
+    assert floor <= min(gaps) < 1.01 * floor
+
+
+@njit(**KERNEL)
+def _every_pair(x: np.ndarray, c) -> np.ndarray:  # noqa: ANN001
+    """The reference by brute force: every point-triangle and edge-edge pair tested, in order."""
+    dmin = np.full(x.shape[1], c.radius)
+    npt = 0
+    for p in range(x.shape[1]):
+        for t in range(c.tris.shape[1]):
+            npt = _point_triangle(x, c, p, t, dmin, npt)
+    nee = 0
+    for e1 in range(c.edges.shape[1]):
+        for e2 in range(e1 + 1, c.edges.shape[1]):
+            nee = _edge_edge(x, c, e1, e2, dmin, nee)
+    c.meta[1] = npt
+    c.meta[2] = nee
+    return dmin
+
+
+@pytest.mark.parametrize("frames", [35, 60])
+def test_the_broad_phase_finds_every_pair_brute_force_finds(frames: int) -> None:
+    # landing (35: points within the query radius, none yet within the contact distance) and folded
+    # on the floor (60): the same pairs stored, with the same weights, normals and balls as testing
+    # every pair
+    from clothsim.sim.passes.contact import FLOOR, GAMMA, contact_group, rebuild
+
+    sim = Simulation(self_collision_scene(20))
+    sim.step(frames)
+    x = np.ascontiguousarray(sim.positions.T)
+    c = sim._kernel_args.contact
+    rebuild(x, c)
+    want = contact_group(x, c.tris, c.movable, sim.scene.cloth.thickness)
+    dmin = _every_pair(x, want)
+    npt, nee = int(c.meta[1]), int(c.meta[2])
+    assert (npt, nee) == (int(want.meta[1]), int(want.meta[2]))
+    # (falling, no pair is within the contact distance yet, but some within the query radius)
+    assert np.sum(dmin < c.radius) > 10 and ((npt > 10 and nee > 10) if frames == 60 else True)
+    for got_ids, got_f, want_ids, want_f, k, width in ((c.pt, c.ptf, want.pt, want.ptf, npt, c.tris.shape[1]),
+                                                      (c.ee, c.eef, want.ee, want.eef, nee, c.edges.shape[1])):
+        # (pairs in the order brute force finds them; the same arithmetic, compiled in another
+        # function: contracted multiply-adds may round apart)
+        order = np.argsort(got_ids[0, :k] * width + got_ids[1, :k])
+        assert np.array_equal(got_ids[:, :k][:, order], want_ids[:, :k])
+        assert np.allclose(got_f[:, :k][:, order], want_f[:, :k], rtol=0, atol=1e-12)
+    r = GAMMA * np.maximum(dmin - FLOOR * c.thickness, 0.0)
+    assert np.allclose(c.rho2, r * r, rtol=1e-9, atol=0)

@@ -8,9 +8,10 @@ may move a point past it).
 The method is the displacement bound of Vertex Block Descent and Offset Geometric Contact (Chen
 et al. 2024, 2025): from a crossing-free reference state, every point gets a ball of radius
 ``GAMMA`` (< 1/2) times its distance to the nearest element it does not belong to (point-triangle
-and edge-edge, both ways, within the query radius). A state in which every point lies in its ball
-is crossing-free, and so is every state on the straight path from the reference to it (a ball is
-convex): two elements at distance d each move less than d/2. In each substep:
+and edge-edge, both ways, within the query radius), less a floor (``FLOOR``) that keeps every pair
+further apart than rounding. A state in which every point lies in its ball is crossing-free, and so
+is every state on the straight path from the reference to it (a ball is convex): two elements at
+distance d each move less than d/2. In each substep:
 
 1. (self-collision slot) if any point's position at the substep's start has left its ball, or
    its position after the integrator would (for a point whose ball is not tiny: ROOMY), the
@@ -43,6 +44,12 @@ from .selfcollide import _cell_key
 
 #: Fraction of the distance to the nearest other element a point may move from its reference.
 GAMMA = 0.45
+#: No two elements come closer than this fraction of the contact distance: a ball's radius is
+#: GAMMA x (d - FLOOR x h), so a pair at d >= FLOOR x h stays at (1 - 2 GAMMA) d + 2 GAMMA FLOOR x h
+#: >= FLOOR x h. Without it distances may shrink by 1 - 2 GAMMA at every rebuild, down to below
+#: the spacing of floats (1e-16 m near 1 m), where a neighbour's move flips the exact crossing test
+#: (seen in the twist: two edges 4e-17 m apart).
+FLOOR = 1e-6
 #: Fraction of the remaining overlap a contact removes per substep beyond stopping the approach.
 PUSH = 0.1
 #: Cloth-on-cloth Coulomb friction coefficient.
@@ -480,8 +487,9 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
                                 or ebox[5, e2] < ebox[2, e1]):
                             continue
                         nee = _edge_edge(x, c, e1, e2, dmin, nee)
+    floor = FLOOR * c.thickness
     for p in range(n):
-        r = GAMMA * dmin[p]
+        r = GAMMA * max(dmin[p] - floor, 0.0)
         c.rho2[p] = r * r
     c.meta[VALID] = 1
     c.meta[N_PT] = npt
