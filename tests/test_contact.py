@@ -261,3 +261,22 @@ def test_the_broad_phase_finds_every_pair_brute_force_finds(frames: int) -> None
         assert np.allclose(got_f[:, :k][:, order], want_f[:, :k], rtol=0, atol=1e-12)
     r = GAMMA * np.maximum(dmin - FLOOR * c.thickness, 0.0)
     assert np.allclose(c.rho2, r * r, rtol=1e-9, atol=0)
+
+
+def test_a_pin_that_leaves_a_small_ball_is_counted_in_that_substep() -> None:
+    # A pin 1 mm above a free triangle (a ball of 0.45 mm, far below ROOMY's) driven 2 mm down in
+    # one substep: the pass must rebuild then and count the substep unsafe, not wait for the next
+    # frame (a free point with a small ball may wait, clamped; a pin is never clamped).
+    from clothsim.sim.passes.contact import GAMMA, REBUILDS, ROOMY, UNSAFE, contact_group, contact_respond, rebuild
+
+    lower = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    upper = [[0.2, 0.2, 0.001], [1.2, 0.2, 0.001], [0.2, 1.2, 0.001]]
+    x = np.ascontiguousarray(np.array(lower + upper).T)
+    movable = np.array([True, True, True, False, True, True])
+    c = contact_group(x, np.array([[0, 3], [1, 4], [2, 5]]), movable, 0.05)
+    rebuild(x, c)
+    assert c.rho2[3] < (ROOMY * GAMMA * c.radius) ** 2
+    pos = x.copy()
+    pos[2, 3] -= 0.002
+    contact_respond(pos, x.copy(), c)
+    assert (c.meta[REBUILDS], c.meta[UNSAFE]) == (2, 1)

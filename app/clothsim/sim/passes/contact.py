@@ -14,7 +14,7 @@ is every state on the straight path from the reference to it (a ball is convex):
 distance d each move less than d/2. In each substep:
 
 1. (self-collision slot) if any point's position at the substep's start has left its ball, or
-   its position after the integrator would (for a point whose ball is not tiny: ROOMY), the
+   its position after the integrator would (for a pin, or a free point whose ball is not tiny: ROOMY), the
    reference is rebuilt from the positions the substep started from (crossing-free, by the same
    argument), and at the first substep of every frame;
 2. (self-collision slot) every stored pair closer than the contact distance is pushed apart along its reference normal
@@ -499,12 +499,13 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
 
 @njit(**KERNEL)
 def _leaving(x: np.ndarray, c: Contact) -> bool:
-    """True when a point with a roomy ball (see ROOMY) lies outside it in ``x``."""
+    """True when a pinned point, or a free point with a roomy ball (see ROOMY), lies outside its
+    ball in ``x`` (a pin cannot wait clamped for the next rebuild: its motion is prescribed)."""
     ref = c.ref
     rho2 = c.rho2
     roomy = (ROOMY * GAMMA * c.radius) ** 2
     for p in range(x.shape[1]):
-        if rho2[p] < roomy:
+        if rho2[p] < roomy and c.movable[p]:
             continue
         dx = x[0, p] - ref[0, p]
         dy = x[1, p] - ref[1, p]
