@@ -14,9 +14,9 @@ is every state on the straight path from the reference to it (a ball is convex):
 distance d each move less than d/2. In each substep:
 
 1. (self-collision slot) if any point's position at the substep's start has left its ball, or
-   its position after the integrator would (for a pin, or a free point whose ball is not tiny: ROOMY), the
-   reference is rebuilt from the positions the substep started from (crossing-free, by the same
-   argument), and at the first substep of every frame;
+   its position after the integrator would (for a pin, or a free point whose ball is not tiny:
+   ROOMY), the reference is rebuilt from the positions the substep started from (crossing-free,
+   by the same argument), and at the first substep of every frame;
 2. (self-collision slot) every stored pair closer than the contact distance is pushed apart along its reference normal
    (inelastically, plus a fraction of the overlap), with Coulomb friction on the pair's relative
    tangential motion; corrections are averaged per point (Jacobi, in pair order);
