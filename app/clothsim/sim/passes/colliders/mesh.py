@@ -457,9 +457,9 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
         qx, qy, qz = pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az
         # Most points have nothing within r: they lie beyond r of the mesh's box, or their list
         # is still valid and its nearest triangle, less how far the point is from the list's
-        # reference point, is beyond r. Lengths bounded from above here by their sums of components, made
-        # a little longer so that no rounding can bring them under the Euclidean ones (no
-        # square roots); what this does not rule out, point_contact works out exactly.
+        # reference point, is beyond r. Lengths bounded from above here by their sums of
+        # components, made a little longer so that no rounding can bring them under the Euclidean
+        # ones (no square roots); what this does not rule out, point_contact works out exactly.
         r1 = th + (abs(qx - lx) + abs(qy - ly) + abs(qz - lz)) * _LONGER
         if (qx + r1 < x0 or qx - r1 > x1 or qy + r1 < y0 or qy - r1 > y1 or qz + r1 < z0 or qz - r1 > z1):
             continue
@@ -562,7 +562,8 @@ def _untracked(g: MeshGroup) -> MeshGroup:
     # the mesh pass reads the poses, never the tracks: without them its type is the same for a
     # moving mesh and a fixed one, so both run one compiled pass
     return MeshGroup(g.verts, g.tris, g.tbox, g.fnorm, g.enorm, g.vnorm, g.info, g.dims, g.cell_start, g.cell_tris,
-                     g.cell_box, g.near_at, g.near_n, g.near_tris, g.near_d, g.near_ref, g.pose, g.thickness, g.on, None, g.collide)
+                     g.cell_box, g.near_at, g.near_n, g.near_tris, g.near_d, g.near_ref, g.pose, g.thickness, g.on,
+                     None, g.collide)
 
 
 @njit(**EXACT)
