@@ -37,10 +37,10 @@ def self_collision_scene(n: int = 22, integrator: str = "verlet", damping: str =
         .with_simulation(self_collision=mode, integrator=integrator, damping_mode=damping)
 
 
-def flag_scene(nw: int = 27, nh: int = 18, mode: str = "contact"):
+def flag_scene(nw: int = 27, nh: int = 18, mode: str = "contact", pin_motion: dict | None = None):
     raw = {"cloth": {"width": 1.5, "height": 1.0, "num_width_points": nw, "num_height_points": nh, "thickness": 0.01,
                      "orientation": "vertical", "pinned": [[0, j] for j in range(nh)], "damping": 0.05,
-                     "density": 0.5, "ks": 300.0},
+                     "density": 0.5, "ks": 300.0, **({} if pin_motion is None else {"pin_motion": pin_motion})},
            "wind": {"velocity": [6.0, 0.0, 0.0], "turbulence": 3.0, "drag": 1.0, "lift": 0.3, "air_density": 1.2,
                     "seed": 7, "turbulence_scale": 2.0},
            "simulation": {"self_collision": mode}}
@@ -280,3 +280,44 @@ def test_a_pin_that_leaves_a_small_ball_is_counted_in_that_substep() -> None:
     pos[2, 3] -= 0.002
     contact_respond(pos, x.copy(), c)
     assert (c.meta[REBUILDS], c.meta[UNSAFE]) == (2, 1)
+
+
+@pytest.mark.parametrize("sweeps", [1, 4])
+def test_the_response_pushes_an_isolated_pair_by_its_sweeps(sweeps: int) -> None:
+    # A free point 0.05 above a pinned triangle, contact distance 0.1, not moving: each sweep
+    # removes PUSH (one sweep) or PUSH_MOVING (SWEEPS_MOVING sweeps, while pins move) of the
+    # overlap left, so 1 - (1 - push)^sweeps of it goes.
+    from clothsim.sim.passes.contact import PUSH, PUSH_MOVING, SWEEPS, SWEEPS_MOVING, contact_group, rebuild, respond
+
+    x = np.ascontiguousarray(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.2, 0.05, 0.2]]).T)
+    c = contact_group(x, np.array([[0], [1], [2]]), np.array([False, False, False, True]), 0.1)
+    rebuild(x, c)
+    assert c.meta[1] == 1  # the one point-triangle pair
+    c.meta[SWEEPS] = SWEEPS_MOVING if sweeps > 1 else 1
+    pos = x.copy()
+    respond(pos, x.copy(), c)
+    push = PUSH_MOVING if sweeps > 1 else PUSH
+    n = SWEEPS_MOVING if sweeps > 1 else 1
+    assert pos[1, 3] == pytest.approx(0.1 - 0.05 * (1.0 - push) ** n, abs=1e-15)
+    assert np.array_equal(pos[:, :3], x[:, :3])  # pinned
+    assert pos[[0, 2], 3] == pytest.approx(x[[0, 2], 3], abs=1e-15)  # pushed along the normal only
+
+
+def test_the_response_sweeps_while_pins_move() -> None:
+    # One sweep while the pins stay; SWEEPS_MOVING in a frame whose pins were put elsewhere through
+    # the API, and in every frame of a scene whose pins follow a track.
+    from clothsim.sim.passes.contact import SWEEPS, SWEEPS_MOVING
+
+    sim = Simulation(flag_scene(9, 6))
+    meta = sim._kernel_args.contact.meta
+    sim.step(1)
+    assert meta[SWEEPS] == 1
+    pins = np.flatnonzero(sim.pinned)
+    sim.positions[pins] += [0.0, 0.0, 0.01]
+    sim.step(1)
+    assert meta[SWEEPS] == SWEEPS_MOVING
+    sim.step(1)
+    assert meta[SWEEPS] == 1
+    tracked = Simulation(flag_scene(9, 6, pin_motion={"keyframes": [[0.0, [0.0, 0.0, 0.0]], [1.0, [0.0, 0.1, 0.0]]]}))
+    tracked.step(1)
+    assert tracked._kernel_args.contact.meta[SWEEPS] == SWEEPS_MOVING

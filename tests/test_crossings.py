@@ -26,12 +26,7 @@ from crossing_support import (STRESS_FRAMES, STRESS_TWIST_SECONDS, _exact_sign, 
 NO_CROSSING_MODES: list[str] = ["contact"]
 #: (mode, scene) pairs of NO_CROSSING_MODES that do not hold yet, with why: left out of the proof
 #: and measured by the bench until they hold.
-KNOWN_LEAKS: dict[tuple[str, str], str] = {
-    ("contact", "twist"): "the twist's pins are driven through their own displacement bounds (a pin is never held "
-                          "back): next to the pinned rows the twist squeezes quads flat, and a pin moving 1.3-1.5 mm "
-                          "a substep outruns a ball of ~1.2 mm; 20x20, 120 frames: first crossing at frame 79, max "
-                          "38 (frame 113), final 37",
-}
+KNOWN_LEAKS: dict[tuple[str, str], str] = {}
 STRESS_CASES = [(mode, scene) for mode in ("off", *NO_CROSSING_MODES) for scene in STRESS_SCENES
                 if (mode, scene) not in KNOWN_LEAKS]
 

@@ -22,6 +22,7 @@ from .passes.wind import triangles
 from ..jit import CHUNKS
 from ..jit.internals import packed_value
 from .passes.pins import move_pins
+from .passes.contact import SWEEPS, SWEEPS_MOVING
 from .passes.colliders.mesh import MeshGroup, collide_address
 from .passes.colliders.moving import top_speed
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
@@ -97,6 +98,7 @@ class Simulation:
         self._crossings_checked = False
         self._replan()
         self._place_pins()
+        self._pins_seen = self._pos[:, self._pins].copy()
 
     # ------------------------------------------------------------------------------------------
     # Parameters (re-plan on change)
@@ -387,6 +389,7 @@ class Simulation:
         self._crossings_checked = False
         self._clock[:] = 0.0
         self._place_pins()
+        self._pins_seen = self._pos[:, self._pins].copy()
 
     def step(self, frames: int = 1) -> None:
         """Advance ``frames`` frames of ``simulation_steps`` substeps each.
@@ -462,6 +465,16 @@ class Simulation:
         if contact is not None:
             contact.meta[0] = 0
 
+    def _contact_sweeps(self) -> None:
+        # The contact response's strength for the frame: stronger while pins move (a pin track, or
+        # pins put elsewhere through the API since the last frame), so the cloth makes way for them
+        # (see clothsim.sim.passes.contact.SWEEPS_MOVING).
+        contact = self._kernel_args.contact
+        if contact is not None:
+            moving = self._kernel_args.pins is not None or not np.array_equal(self._pos[:, self._pins],
+                                                                              self._pins_seen)
+            contact.meta[SWEEPS] = SWEEPS_MOVING if moving else 1
+
     def _check_crossings(self) -> None:
         # once per start: the contact mode keeps a cloth from crossing itself, but cannot undo
         # crossings it is given (positions set through the API)
@@ -486,8 +499,11 @@ class Simulation:
         state = self.integrator_state
         saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy(), self._clock.copy())
         self._forget_contacts()
+        self._contact_sweeps()
         steps = self.scene.simulation.simulation_steps
         run(steps, saved)
+        if self._kernel_args.contact is not None:
+            self._pins_seen[...] = self._pos[:, self._pins]
         if sim_blow_up_reason(self) is not None:
             self._report_blow_up(saved, steps)
         self.frame += 1
