@@ -89,12 +89,15 @@ class StressRecord:
                 f"final {self.counts[-1] if self.counts else 0}{end}")
 
 
-def stress_record(scene: str, mode: str, frames: int = STRESS_FRAMES, grid: int = STRESS_GRID) -> StressRecord:
-    """Run stress scene ``scene`` in ``mode`` and count crossings at the end of every frame."""
+def stress_record(scene: str, mode: str, frames: int = STRESS_FRAMES, grid: int | None = None) -> StressRecord:
+    """Run stress scene ``scene`` in ``mode`` and count crossings at the end of every frame, on
+    ``grid`` points a side (default STRESS_GRID, the twist STRESS_TWIST_GRID)."""
     from clothsim.bench.stress import StressRun
     from clothsim.errors import SimulationBlowUp
 
-    run = StressRun(scene, mode, STRESS_TWIST_GRID if scene == "twist" else grid, twist_seconds=STRESS_TWIST_SECONDS)
+    if grid is None:
+        grid = STRESS_TWIST_GRID if scene == "twist" else STRESS_GRID
+    run = StressRun(scene, mode, grid, twist_seconds=STRESS_TWIST_SECONDS)
     counts: list[int] = []
     for f in range(1, frames + 1):
         try:

@@ -287,13 +287,13 @@ def test_the_response_pushes_an_isolated_pair_by_its_sweeps(sweeps: int) -> None
     # A free point 0.05 above a pinned triangle, contact distance 0.1, not moving: each sweep
     # removes PUSH (one sweep) or PUSH_MOVING (SWEEPS_MOVING sweeps, while pins move) of the
     # overlap left, so 1 - (1 - push)^sweeps of it goes.
-    from clothsim.sim.passes.contact import PUSH, PUSH_MOVING, SWEEPS, SWEEPS_MOVING, contact_group, rebuild, respond
+    from clothsim.sim.passes.contact import MOVING, PUSH, PUSH_MOVING, SWEEPS_MOVING, contact_group, rebuild, respond
 
     x = np.ascontiguousarray(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.2, 0.05, 0.2]]).T)
     c = contact_group(x, np.array([[0], [1], [2]]), np.array([False, False, False, True]), 0.1)
     rebuild(x, c)
     assert c.meta[1] == 1  # the one point-triangle pair
-    c.meta[SWEEPS] = SWEEPS_MOVING if sweeps > 1 else 1
+    c.meta[MOVING] = sweeps > 1
     pos = x.copy()
     respond(pos, x.copy(), c)
     push = PUSH_MOVING if sweeps > 1 else PUSH
@@ -306,18 +306,18 @@ def test_the_response_pushes_an_isolated_pair_by_its_sweeps(sweeps: int) -> None
 def test_the_response_sweeps_while_pins_move() -> None:
     # One sweep while the pins stay; SWEEPS_MOVING in a frame whose pins were put elsewhere through
     # the API, and in every frame of a scene whose pins follow a track.
-    from clothsim.sim.passes.contact import SWEEPS, SWEEPS_MOVING
+    from clothsim.sim.passes.contact import MOVING
 
     sim = Simulation(flag_scene(9, 6))
     meta = sim._kernel_args.contact.meta
     sim.step(1)
-    assert meta[SWEEPS] == 1
+    assert meta[MOVING] == 0
     pins = np.flatnonzero(sim.pinned)
     sim.positions[pins] += [0.0, 0.0, 0.01]
     sim.step(1)
-    assert meta[SWEEPS] == SWEEPS_MOVING
+    assert meta[MOVING] == 1
     sim.step(1)
-    assert meta[SWEEPS] == 1
+    assert meta[MOVING] == 0
     tracked = Simulation(flag_scene(9, 6, pin_motion={"keyframes": [[0.0, [0.0, 0.0, 0.0]], [1.0, [0.0, 0.1, 0.0]]]}))
     tracked.step(1)
-    assert tracked._kernel_args.contact.meta[SWEEPS] == SWEEPS_MOVING
+    assert tracked._kernel_args.contact.meta[MOVING] == 1

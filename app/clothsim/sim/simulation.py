@@ -22,7 +22,7 @@ from .passes.wind import triangles
 from ..jit import CHUNKS
 from ..jit.internals import packed_value
 from .passes.pins import move_pins
-from .passes.contact import SWEEPS, SWEEPS_MOVING
+from .passes.contact import MOVING
 from .passes.colliders.mesh import MeshGroup, collide_address
 from .passes.colliders.moving import top_speed
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
@@ -468,12 +468,12 @@ class Simulation:
     def _contact_sweeps(self) -> None:
         # The contact response's strength for the frame: stronger while pins move (a pin track, or
         # pins put elsewhere through the API since the last frame), so the cloth makes way for them
-        # (see clothsim.sim.passes.contact.SWEEPS_MOVING).
+        # (see clothsim.sim.passes.contact.respond).
         contact = self._kernel_args.contact
         if contact is not None:
             moving = self._kernel_args.pins is not None or not np.array_equal(self._pos[:, self._pins],
                                                                               self._pins_seen)
-            contact.meta[SWEEPS] = SWEEPS_MOVING if moving else 1
+            contact.meta[MOVING] = moving
 
     def _check_crossings(self) -> None:
         # once per start: the contact mode keeps a cloth from crossing itself, but cannot undo

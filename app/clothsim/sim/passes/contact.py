@@ -73,9 +73,8 @@ REACH = 1.5
 #: (at the latest the next frame's first substep).
 ROOMY = 0.25
 
-# meta fields (SWEEPS: the response's sweeps in this frame, set by the simulation: 1, or
-# SWEEPS_MOVING while pins move)
-VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE, SWEEPS = 0, 1, 2, 3, 4, 5, 6
+# meta fields (MOVING: 1 in a frame whose pins move, set by the simulation)
+VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE, MOVING = 0, 1, 2, 3, 4, 5, 6
 META = 7
 
 
@@ -122,11 +121,9 @@ def contact_group(pos: np.ndarray, tris: np.ndarray, movable: np.ndarray, thickn
     radius = REACH * h
     n = pos.shape[1]
     cap = 16 * n + 64
-    meta = np.zeros(META, dtype=np.int64)
-    meta[SWEEPS] = 1
     return Contact(tris, edges, np.ascontiguousarray(movable, dtype=np.bool_), np.zeros((3, n)), np.zeros(n),
                    np.zeros((2, cap), dtype=np.int64), np.zeros((6, cap)), np.zeros((2, cap), dtype=np.int64),
-                   np.zeros((5, cap)), np.zeros((3, n)), np.zeros(n, dtype=np.int64), meta,
+                   np.zeros((5, cap)), np.zeros((3, n)), np.zeros(n, dtype=np.int64), np.zeros(META, dtype=np.int64),
                    h, radius, max(radius, 2.0 * float(np.median(lengths))))
 
 
@@ -601,11 +598,12 @@ def _respond(pos: np.ndarray, last: np.ndarray, c: Contact, ids: np.ndarray, coe
 
 @njit(**KERNEL)
 def respond(pos: np.ndarray, last: np.ndarray, c: Contact) -> None:
-    """The response: ``meta[SWEEPS]`` sweeps of :func:`sweep`."""
+    """The response: one :func:`sweep` of ``PUSH``, or ``SWEEPS_MOVING`` of ``PUSH_MOVING`` in a
+    frame whose pins move (``meta[MOVING]``)."""
     ids = np.empty(4, dtype=np.int64)
     coef = np.empty(4)
-    push = PUSH if c.meta[SWEEPS] <= 1 else PUSH_MOVING
-    for _ in range(max(c.meta[SWEEPS], 1)):
+    sweeps, push = (SWEEPS_MOVING, PUSH_MOVING) if c.meta[MOVING] else (1, PUSH)
+    for _ in range(sweeps):
         sweep(pos, last, c, ids, coef, push)
 
 
