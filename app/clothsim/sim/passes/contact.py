@@ -40,7 +40,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...jit import EXACT, KERNEL
+from ...jit import BORROWED, EXACT, KERNEL
 from .selfcollide import _cell_key
 
 #: Fraction of the distance to the nearest other element a point may move from its reference.
@@ -131,7 +131,7 @@ def contact_group(pos: np.ndarray, tris: np.ndarray, movable: np.ndarray, thickn
 # closest points
 
 
-@njit(inline="always", **KERNEL)
+@njit(inline="always", **EXACT)
 def closest_on_triangle(px: float, py: float, pz: float, ax: float, ay: float, az: float, bx: float, by: float,
                         bz: float, cx: float, cy: float, cz: float) -> tuple[float, float, float]:
     """Barycentric weights of the point of triangle abc nearest to p (Ericson, Real-Time
@@ -171,12 +171,12 @@ def closest_on_triangle(px: float, py: float, pz: float, ax: float, ay: float, a
     return 1.0 - v - w, v, w
 
 
-@njit(inline="always", **KERNEL)
+@njit(inline="always", **EXACT)
 def _clamp01(x: float) -> float:
     return min(max(x, 0.0), 1.0)
 
 
-@njit(inline="always", **KERNEL)
+@njit(inline="always", **EXACT)
 def closest_on_segments(p1x: float, p1y: float, p1z: float, q1x: float, q1y: float, q1z: float, p2x: float,
                         p2y: float, p2z: float, q2x: float, q2y: float, q2z: float) -> tuple[float, float]:
     """Parameters (s, t) of the closest points p1 + s (q1 - p1), p2 + t (q2 - p2) of two segments
@@ -347,21 +347,15 @@ def _first_cell(box: np.ndarray, a: int, b: int, inv: float) -> np.int64:
 # the reference state
 
 
-@njit(inline="always", **KERNEL)
-def _point_triangle(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray, npt: int) -> int:
-    """Test one point-triangle pair; returns the pairs stored (npt, or npt + 1)."""
-    tris = c.tris
-    a, b, cc = tris[0, t], tris[1, t], tris[2, t]
-    if p == a or p == b or p == cc:
-        return npt
-    wa, wb, wc = closest_on_triangle(x[0, p], x[1, p], x[2, p], x[0, a], x[1, a], x[2, a], x[0, b],
-                                     x[1, b], x[2, b], x[0, cc], x[1, cc], x[2, cc])
-    nx = x[0, p] - (wa * x[0, a] + wb * x[0, b] + wc * x[0, cc])
-    ny = x[1, p] - (wa * x[1, a] + wb * x[1, b] + wc * x[1, cc])
-    nz = x[2, p] - (wa * x[2, a] + wb * x[2, b] + wc * x[2, cc])
-    d = np.sqrt(nx * nx + ny * ny + nz * nz)
+@njit(inline="always", **EXACT)
+def _keep_pt(c: Contact, p: int, t: int, wa: float, wb: float, wc: float, nx: float, ny: float, nz: float, d: float,
+             dmin: np.ndarray, npt: int) -> int:
+    """A point-triangle pair at distance ``d`` (weights, unnormalised normal): the balls of its
+    points bounded by it, and stored if within the contact distance; returns the pairs stored."""
     if d >= c.radius:
         return npt
+    tris = c.tris
+    a, b, cc = tris[0, t], tris[1, t], tris[2, t]
     dmin[p] = min(dmin[p], d)
     dmin[a] = min(dmin[a], d)
     dmin[b] = min(dmin[b], d)
@@ -382,22 +376,33 @@ def _point_triangle(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray,
     return npt
 
 
-@njit(inline="always", **KERNEL)
-def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, nee: int) -> int:
-    """Test one edge-edge pair; returns the pairs stored."""
+@njit(inline="always", **EXACT)
+def _point_triangle(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray, npt: int) -> int:
+    """Test one point-triangle pair; returns the pairs stored (npt, or npt + 1). (The rebuild tests
+    its pairs in batches, :func:`_triangles_batch`, with the same bits.)"""
+    tris = c.tris
+    a, b, cc = tris[0, t], tris[1, t], tris[2, t]
+    if p == a or p == b or p == cc:
+        return npt
+    wa, wb, wc = closest_on_triangle(x[0, p], x[1, p], x[2, p], x[0, a], x[1, a], x[2, a], x[0, b],
+                                     x[1, b], x[2, b], x[0, cc], x[1, cc], x[2, cc])
+    nx = x[0, p] - (wa * x[0, a] + wb * x[0, b] + wc * x[0, cc])
+    ny = x[1, p] - (wa * x[1, a] + wb * x[1, b] + wc * x[1, cc])
+    nz = x[2, p] - (wa * x[2, a] + wb * x[2, b] + wc * x[2, cc])
+    d = np.sqrt(nx * nx + ny * ny + nz * nz)
+    return _keep_pt(c, p, t, wa, wb, wc, nx, ny, nz, d, dmin, npt)
+
+
+@njit(inline="always", **EXACT)
+def _keep_ee(c: Contact, e1: int, e2: int, u: float, v: float, nx: float, ny: float, nz: float, d: float,
+             dmin: np.ndarray, nee: int) -> int:
+    """An edge-edge pair at distance ``d`` (segment parameters, unnormalised normal), as
+    :func:`_keep_pt`; returns the pairs stored."""
+    if d >= c.radius:
+        return nee
     edges = c.edges
     p1, q1 = edges[0, e1], edges[1, e1]
     p2, q2 = edges[0, e2], edges[1, e2]
-    if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
-        return nee
-    u, v = closest_on_segments(x[0, p1], x[1, p1], x[2, p1], x[0, q1], x[1, q1], x[2, q1], x[0, p2],
-                               x[1, p2], x[2, p2], x[0, q2], x[1, q2], x[2, q2])
-    nx = (x[0, p1] + u * (x[0, q1] - x[0, p1])) - (x[0, p2] + v * (x[0, q2] - x[0, p2]))
-    ny = (x[1, p1] + u * (x[1, q1] - x[1, p1])) - (x[1, p2] + v * (x[1, q2] - x[1, p2]))
-    nz = (x[2, p1] + u * (x[2, q1] - x[2, p1])) - (x[2, p2] + v * (x[2, q2] - x[2, p2]))
-    d = np.sqrt(nx * nx + ny * ny + nz * nz)
-    if d >= c.radius:
-        return nee
     dmin[p1] = min(dmin[p1], d)
     dmin[q1] = min(dmin[q1], d)
     dmin[p2] = min(dmin[p2], d)
@@ -414,6 +419,187 @@ def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, ne
             return nee + 1
         c.meta[DROPPED] += 1
     return nee
+
+
+@njit(inline="always", **EXACT)
+def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, nee: int) -> int:
+    """Test one edge-edge pair; returns the pairs stored. (The rebuild tests its pairs in batches,
+    :func:`_segments_batch`, with the same bits; this one takes the pairs with an edge of no
+    length.)"""
+    edges = c.edges
+    p1, q1 = edges[0, e1], edges[1, e1]
+    p2, q2 = edges[0, e2], edges[1, e2]
+    if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
+        return nee
+    u, v = closest_on_segments(x[0, p1], x[1, p1], x[2, p1], x[0, q1], x[1, q1], x[2, q1], x[0, p2],
+                               x[1, p2], x[2, p2], x[0, q2], x[1, q2], x[2, q2])
+    nx = (x[0, p1] + u * (x[0, q1] - x[0, p1])) - (x[0, p2] + v * (x[0, q2] - x[0, p2]))
+    ny = (x[1, p1] + u * (x[1, q1] - x[1, p1])) - (x[1, p2] + v * (x[1, q2] - x[1, p2]))
+    nz = (x[2, p1] + u * (x[2, q1] - x[2, p1])) - (x[2, p2] + v * (x[2, q2] - x[2, p2]))
+    d = np.sqrt(nx * nx + ny * ny + nz * nz)
+    return _keep_ee(c, e1, e2, u, v, nx, ny, nz, d, dmin, nee)
+
+
+#: Pairs a rebuild collects before testing them together.
+BATCH = 256
+
+
+@njit(inline="always", **EXACT)
+def _get3(rows: np.ndarray, row: int, k: int) -> tuple[float, float, float]:
+    # column k of rows row .. row + 2 of a batch (flat, BATCH long rows: a constant stride, so the
+    # loop over a batch needs no run-time test that its rows do not overlap, and is vectorised)
+    return rows[row * BATCH + k], rows[(row + 1) * BATCH + k], rows[(row + 2) * BATCH + k]
+
+
+@njit(inline="always", **EXACT)
+def _put_point(rows: np.ndarray, row: int, k: int, x: np.ndarray, p: int) -> None:
+    rows[row * BATCH + k] = x[0, p]
+    rows[(row + 1) * BATCH + k] = x[1, p]
+    rows[(row + 2) * BATCH + k] = x[2, p]
+# rows of the batch (flat, BATCH long each): the four ends' coordinates
+_P1, _Q1, _P2, _Q2 = 0, 3, 6, 9
+# rows of the results: s, t, normal (unnormalised), distance, degenerate (1.0: an edge of no length)
+_S, _T, _N, _D, _DEG = 0, 1, 2, 5, 6
+
+
+@njit(**BORROWED)
+def _segments_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
+    """:func:`closest_on_segments` and the distance of each of the first ``n`` pairs of a batch,
+    without branches (every case computed, the one that applies kept): the loop runs over several
+    pairs at once. A pair with an edge of no length is marked, for the scalar test."""
+    for k in range(n):
+        p1x, p1y, p1z = _get3(xin, _P1, k)
+        q1x, q1y, q1z = _get3(xin, _Q1, k)
+        p2x, p2y, p2z = _get3(xin, _P2, k)
+        q2x, q2y, q2z = _get3(xin, _Q2, k)
+        d1x, d1y, d1z = q1x - p1x, q1y - p1y, q1z - p1z
+        d2x, d2y, d2z = q2x - p2x, q2y - p2y, q2z - p2z
+        rx, ry, rz = p1x - p2x, p1y - p2y, p1z - p2z
+        a = d1x * d1x + d1y * d1y + d1z * d1z
+        e = d2x * d2x + d2y * d2y + d2z * d2z
+        f = d2x * rx + d2y * ry + d2z * rz
+        c = d1x * rx + d1y * ry + d1z * rz
+        b = d1x * d2x + d1y * d2y + d1z * d2z
+        denom = a * e - b * b
+        s = min(max((b * f - c * e) / denom, 0.0), 1.0)
+        s = s if denom > 0.0 else 0.0
+        t = (b * s + f) / e
+        low = min(max(-c / a, 0.0), 1.0)
+        high = min(max((b - c) / a, 0.0), 1.0)
+        u = low if t < 0.0 else (high if t > 1.0 else s)
+        v = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+        nx = (p1x + u * (q1x - p1x)) - (p2x + v * (q2x - p2x))
+        ny = (p1y + u * (q1y - p1y)) - (p2y + v * (q2y - p2y))
+        nz = (p1z + u * (q1z - p1z)) - (p2z + v * (q2z - p2z))
+        out[_S * BATCH + k] = u
+        out[_T * BATCH + k] = v
+        out[_N * BATCH + k] = nx
+        out[(_N + 1) * BATCH + k] = ny
+        out[(_N + 2) * BATCH + k] = nz
+        out[_D * BATCH + k] = np.sqrt(nx * nx + ny * ny + nz * nz)
+        out[_DEG * BATCH + k] = 1.0 if (a <= 1e-30) | (e <= 1e-30) else 0.0
+
+
+@njit(**BORROWED)
+def _settle_ee(x: np.ndarray, c: Contact, pairs: np.ndarray, out: np.ndarray, n: int, dmin: np.ndarray,
+               nee: int) -> int:
+    """The batch's pairs, in order, as :func:`_edge_edge` takes them one by one; returns the pairs
+    stored."""
+    for k in range(n):
+        e1 = pairs[k]
+        e2 = pairs[BATCH + k]
+        if out[_DEG * BATCH + k] != 0.0:
+            nee = _edge_edge(x, c, e1, e2, dmin, nee)
+        else:
+            nx, ny, nz = _get3(out, _N, k)
+            nee = _keep_ee(c, e1, e2, out[_S * BATCH + k], out[_T * BATCH + k], nx, ny, nz, out[_D * BATCH + k],
+                           dmin, nee)
+    return nee
+
+
+#: Rows of a point-triangle batch: the point and the corners a, b, c; of its results: the weights,
+#: the normal (unnormalised) and the distance.
+_PP, _PA, _PB, _PC = 0, 3, 6, 9
+_W, _PN, _PD = 0, 3, 6
+
+
+@njit(**BORROWED)
+def _triangles_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
+    """:func:`closest_on_triangle` and the distance of each of the first ``n`` pairs of a batch,
+    without branches (every region's weights computed, the one the scalar test would return
+    kept): the loop runs over several pairs at once, with the same bits."""
+    for k in range(n):
+        px, py, pz = _get3(xin, _PP, k)
+        ax, ay, az = _get3(xin, _PA, k)
+        bx, by, bz = _get3(xin, _PB, k)
+        cx, cy, cz = _get3(xin, _PC, k)
+        abx, aby, abz = bx - ax, by - ay, bz - az
+        acx, acy, acz = cx - ax, cy - ay, cz - az
+        apx, apy, apz = px - ax, py - ay, pz - az
+        d1 = abx * apx + aby * apy + abz * apz
+        d2 = acx * apx + acy * apy + acz * apz
+        bpx, bpy, bpz = px - bx, py - by, pz - bz
+        d3 = abx * bpx + aby * bpy + abz * bpz
+        d4 = acx * bpx + acy * bpy + acz * bpz
+        vc = d1 * d4 - d3 * d2
+        cpx, cpy, cpz = px - cx, py - cy, pz - cz
+        d5 = abx * cpx + aby * cpy + abz * cpz
+        d6 = acx * cpx + acy * cpy + acz * cpz
+        vb = d5 * d2 - d1 * d6
+        va = d3 * d6 - d5 * d4
+        # the regions from last to first, each taking over where closest_on_triangle would stop at it
+        denom = 1.0 / (va + vb + vc)
+        v = vb * denom
+        w = vc * denom
+        wa, wb, wc = 1.0 - v - w, v, w
+        here = va <= 0.0 and d4 - d3 >= 0.0 and d5 - d6 >= 0.0
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        wa = 0.0 if here else wa
+        wb = 1.0 - w if here else wb
+        wc = w if here else wc
+        here = vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0
+        w = d2 / (d2 - d6)
+        wa = 1.0 - w if here else wa
+        wb = 0.0 if here else wb
+        wc = w if here else wc
+        here = d6 >= 0.0 and d5 <= d6
+        wa = 0.0 if here else wa
+        wb = 0.0 if here else wb
+        wc = 1.0 if here else wc
+        here = vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0
+        v = d1 / (d1 - d3)
+        wa = 1.0 - v if here else wa
+        wb = v if here else wb
+        wc = 0.0 if here else wc
+        here = d3 >= 0.0 and d4 <= d3
+        wa = 0.0 if here else wa
+        wb = 1.0 if here else wb
+        wc = 0.0 if here else wc
+        here = d1 <= 0.0 and d2 <= 0.0
+        wa = 1.0 if here else wa
+        wb = 0.0 if here else wb
+        wc = 0.0 if here else wc
+        nx = px - (wa * ax + wb * bx + wc * cx)
+        ny = py - (wa * ay + wb * by + wc * cy)
+        nz = pz - (wa * az + wb * bz + wc * cz)
+        out[_W * BATCH + k] = wa
+        out[(_W + 1) * BATCH + k] = wb
+        out[(_W + 2) * BATCH + k] = wc
+        out[_PN * BATCH + k] = nx
+        out[(_PN + 1) * BATCH + k] = ny
+        out[(_PN + 2) * BATCH + k] = nz
+        out[_PD * BATCH + k] = np.sqrt(nx * nx + ny * ny + nz * nz)
+
+
+@njit(**BORROWED)
+def _settle_pt(c: Contact, pairs: np.ndarray, out: np.ndarray, n: int, dmin: np.ndarray, npt: int) -> int:
+    """The batch's pairs, in order, as :func:`_point_triangle` takes them one by one; returns the
+    pairs stored."""
+    for k in range(n):
+        wa, wb, wc = _get3(out, _W, k)
+        nx, ny, nz = _get3(out, _PN, k)
+        npt = _keep_pt(c, pairs[k], pairs[BATCH + k], wa, wb, wc, nx, ny, nz, out[_PD * BATCH + k], dmin, npt)
+    return npt
 
 
 @njit(**KERNEL)
@@ -435,7 +621,7 @@ def _element_boxes(x: np.ndarray, ids: np.ndarray, pad: float) -> np.ndarray:
     return box
 
 
-@njit(**KERNEL)
+@njit(**EXACT)
 def rebuild(x: np.ndarray, c: Contact) -> None:
     """Make ``x`` (3, N) the reference: find every point-triangle and edge-edge pair closer than
     the query radius, store them, and give each point its ball.
@@ -453,6 +639,14 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     inv = 1.0 / c.cell
     npt = 0
     nee = 0
+    # the pairs whose boxes overlap are tested a batch at a time (_triangles_batch, _segments_batch),
+    # then taken in the order found, as _point_triangle and _edge_edge take them one by one
+    tris = c.tris
+    edges = c.edges
+    xin = np.empty(12 * BATCH)
+    out = np.empty(7 * BATCH)
+    pairs = np.empty(2 * BATCH, dtype=np.int64)
+    nb = 0
     # point-triangle
     tbox = _element_boxes(x, c.tris, radius)
     start, ids, keys = cell_table(tbox, c.cell)
@@ -467,7 +661,23 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
             if (x[0, p] < tbox[0, t] or x[0, p] > tbox[3, t] or x[1, p] < tbox[1, t] or x[1, p] > tbox[4, t]
                     or x[2, p] < tbox[2, t] or x[2, p] > tbox[5, t]):
                 continue
-            npt = _point_triangle(x, c, p, t, dmin, npt)
+            a, b, cc = tris[0, t], tris[1, t], tris[2, t]
+            if p == a or p == b or p == cc:
+                continue
+            _put_point(xin, _PP, nb, x, p)
+            _put_point(xin, _PA, nb, x, a)
+            _put_point(xin, _PB, nb, x, b)
+            _put_point(xin, _PC, nb, x, cc)
+            pairs[nb] = p
+            pairs[BATCH + nb] = t
+            nb += 1
+            if nb == BATCH:
+                _triangles_batch(xin, out, nb)
+                npt = _settle_pt(c, pairs, out, nb, dmin, npt)
+                nb = 0
+    if nb > 0:
+        _triangles_batch(xin, out, nb)
+        npt = _settle_pt(c, pairs, out, nb, dmin, npt)
     # edge-edge: each edge once, in its lower corner's cell (cells as large as the largest box)
     ebox = _element_boxes(x, c.edges, 0.5 * radius)
     ne = ebox.shape[1]
@@ -475,6 +685,7 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     for e in range(ne):
         ecell = max(ecell, ebox[3, e] - ebox[0, e], ebox[4, e] - ebox[1, e], ebox[5, e] - ebox[2, e])
     einv = 1.0 / ecell
+    nb = 0
     start, ids, keys = corner_table(ebox, ecell)
     mask = np.uint64(start.shape[0] - 2)
     for e1 in range(ne):
@@ -494,7 +705,24 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
                                 or ebox[4, e2] < ebox[1, e1] or ebox[2, e2] > ebox[5, e1]
                                 or ebox[5, e2] < ebox[2, e1]):
                             continue
-                        nee = _edge_edge(x, c, e1, e2, dmin, nee)
+                        p1, q1 = edges[0, e1], edges[1, e1]
+                        p2, q2 = edges[0, e2], edges[1, e2]
+                        if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
+                            continue
+                        _put_point(xin, _P1, nb, x, p1)
+                        _put_point(xin, _Q1, nb, x, q1)
+                        _put_point(xin, _P2, nb, x, p2)
+                        _put_point(xin, _Q2, nb, x, q2)
+                        pairs[nb] = e1
+                        pairs[BATCH + nb] = e2
+                        nb += 1
+                        if nb == BATCH:
+                            _segments_batch(xin, out, nb)
+                            nee = _settle_ee(x, c, pairs, out, nb, dmin, nee)
+                            nb = 0
+    if nb > 0:
+        _segments_batch(xin, out, nb)
+        nee = _settle_ee(x, c, pairs, out, nb, dmin, nee)
     floor = FLOOR * c.thickness
     for p in range(n):
         r = GAMMA * max(dmin[p] - floor, 0.0)
