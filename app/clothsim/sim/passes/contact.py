@@ -440,7 +440,7 @@ def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, ne
     return _keep_ee(c, e1, e2, u, v, nx, ny, nz, d, dmin, nee)
 
 
-#: Pairs a rebuild collects before testing them together.
+#: Pairs a rebuild collects before testing them together (see :func:`rebuild`).
 BATCH = 256
 
 
@@ -452,13 +452,28 @@ def _get3(rows: np.ndarray, row: int, k: int) -> tuple[float, float, float]:
 
 
 @njit(inline="always", **EXACT)
-def _put_point(rows: np.ndarray, row: int, k: int, x: np.ndarray, p: int) -> None:
-    rows[row * BATCH + k] = x[0, p]
-    rows[(row + 1) * BATCH + k] = x[1, p]
-    rows[(row + 2) * BATCH + k] = x[2, p]
-# rows of the batch (flat, BATCH long each): the four ends' coordinates
-_P1, _Q1, _P2, _Q2 = 0, 3, 6, 9
-# rows of the results: s, t, normal (unnormalised), distance, degenerate (1.0: an edge of no length)
+def _four_points(rows: np.ndarray, k: int) -> tuple:
+    # the four points (rows 0-2, 3-5, 6-8, 9-11) of a batch's pair k
+    return (*_get3(rows, 0, k), *_get3(rows, 3, k), *_get3(rows, 6, k), *_get3(rows, 9, k))
+
+
+@njit(inline="always", **EXACT)
+def _add_pair(rows: np.ndarray, pairs: np.ndarray, k: int, x: np.ndarray, i0: int, i1: int, i2: int, i3: int,
+              first: int, second: int) -> int:
+    """Put the pair (``first``, ``second``) of points ``i0 .. i3`` of ``x`` at column ``k`` of a
+    batch; returns the batch's new length."""
+    for j, i in enumerate((i0, i1, i2, i3)):
+        rows[(3 * j) * BATCH + k] = x[0, i]
+        rows[(3 * j + 1) * BATCH + k] = x[1, i]
+        rows[(3 * j + 2) * BATCH + k] = x[2, i]
+    pairs[k] = first
+    pairs[BATCH + k] = second
+    return k + 1
+
+
+# A batch is 12 flat rows, BATCH long: a pair's four points (an edge's ends and the other's, or a
+# point and a triangle's corners), x y z each. Rows of an edge-edge batch's results: the segment
+# parameters s, t, the normal (unnormalised), the distance, 1.0 where an edge has no length
 _S, _T, _N, _D, _DEG = 0, 1, 2, 5, 6
 
 
@@ -468,10 +483,7 @@ def _segments_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
     without branches (every case computed, the one that applies kept): the loop runs over several
     pairs at once. A pair with an edge of no length is marked, for the scalar test."""
     for k in range(n):
-        p1x, p1y, p1z = _get3(xin, _P1, k)
-        q1x, q1y, q1z = _get3(xin, _Q1, k)
-        p2x, p2y, p2z = _get3(xin, _P2, k)
-        q2x, q2y, q2z = _get3(xin, _Q2, k)
+        p1x, p1y, p1z, q1x, q1y, q1z, p2x, p2y, p2z, q2x, q2y, q2z = _four_points(xin, k)
         d1x, d1y, d1z = q1x - p1x, q1y - p1y, q1z - p1z
         d2x, d2y, d2z = q2x - p2x, q2y - p2y, q2z - p2z
         rx, ry, rz = p1x - p2x, p1y - p2y, p1z - p2z
@@ -517,9 +529,7 @@ def _settle_ee(x: np.ndarray, c: Contact, pairs: np.ndarray, out: np.ndarray, n:
     return nee
 
 
-#: Rows of a point-triangle batch: the point and the corners a, b, c; of its results: the weights,
-#: the normal (unnormalised) and the distance.
-_PP, _PA, _PB, _PC = 0, 3, 6, 9
+# rows of a point-triangle batch's results: the weights, the normal (unnormalised), the distance
 _W, _PN, _PD = 0, 3, 6
 
 
@@ -529,10 +539,7 @@ def _triangles_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
     without branches (every region's weights computed, the one the scalar test would return
     kept): the loop runs over several pairs at once, with the same bits."""
     for k in range(n):
-        px, py, pz = _get3(xin, _PP, k)
-        ax, ay, az = _get3(xin, _PA, k)
-        bx, by, bz = _get3(xin, _PB, k)
-        cx, cy, cz = _get3(xin, _PC, k)
+        px, py, pz, ax, ay, az, bx, by, bz, cx, cy, cz = _four_points(xin, k)
         abx, aby, abz = bx - ax, by - ay, bz - az
         acx, acy, acz = cx - ax, cy - ay, cz - az
         apx, apy, apz = px - ax, py - ay, pz - az
@@ -664,13 +671,7 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
             a, b, cc = tris[0, t], tris[1, t], tris[2, t]
             if p == a or p == b or p == cc:
                 continue
-            _put_point(xin, _PP, nb, x, p)
-            _put_point(xin, _PA, nb, x, a)
-            _put_point(xin, _PB, nb, x, b)
-            _put_point(xin, _PC, nb, x, cc)
-            pairs[nb] = p
-            pairs[BATCH + nb] = t
-            nb += 1
+            nb = _add_pair(xin, pairs, nb, x, p, a, b, cc, p, t)
             if nb == BATCH:
                 _triangles_batch(xin, out, nb)
                 npt = _settle_pt(c, pairs, out, nb, dmin, npt)
@@ -709,13 +710,7 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
                         p2, q2 = edges[0, e2], edges[1, e2]
                         if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
                             continue
-                        _put_point(xin, _P1, nb, x, p1)
-                        _put_point(xin, _Q1, nb, x, q1)
-                        _put_point(xin, _P2, nb, x, p2)
-                        _put_point(xin, _Q2, nb, x, q2)
-                        pairs[nb] = e1
-                        pairs[BATCH + nb] = e2
-                        nb += 1
+                        nb = _add_pair(xin, pairs, nb, x, p1, q1, p2, q2, e1, e2)
                         if nb == BATCH:
                             _segments_batch(xin, out, nb)
                             nee = _settle_ee(x, c, pairs, out, nb, dmin, nee)
