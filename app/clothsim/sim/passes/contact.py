@@ -637,7 +637,9 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     each point reads its own cell (a triangle is listed once per cell: no pair twice). Edge-edge:
     each edge's box, widened by half the radius, goes once into the cell of its lower corner
     (cells at least as large as every box); each edge reads the cells where an overlapping box
-    can have its lower corner and tests the later edges found there.
+    can have its lower corner and tests the later edges found there. The pairs found are tested
+    ``BATCH`` at a time (:func:`_triangles_batch`, :func:`_segments_batch`), with the bits of
+    :func:`_point_triangle` and :func:`_edge_edge`, and taken in the order found.
     """
     n = x.shape[1]
     radius = c.radius
