@@ -171,6 +171,10 @@ def closest_on_triangle(px: float, py: float, pz: float, ax: float, ay: float, a
     return 1.0 - v - w, v, w
 
 
+#: Squared length below which closest_on_segments takes an edge as a point.
+NO_LENGTH = 1e-30
+
+
 @njit(inline="always", **EXACT)
 def _clamp01(x: float) -> float:
     return min(max(x, 0.0), 1.0)
@@ -187,7 +191,7 @@ def closest_on_segments(p1x: float, p1y: float, p1z: float, q1x: float, q1y: flo
     a = d1x * d1x + d1y * d1y + d1z * d1z
     e = d2x * d2x + d2y * d2y + d2z * d2z
     f = d2x * rx + d2y * ry + d2z * rz
-    eps = 1e-30
+    eps = NO_LENGTH
     if a <= eps and e <= eps:
         return 0.0, 0.0
     if a <= eps:
@@ -509,7 +513,7 @@ def _segments_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
         out[(_N + 1) * BATCH + k] = ny
         out[(_N + 2) * BATCH + k] = nz
         out[_D * BATCH + k] = np.sqrt(nx * nx + ny * ny + nz * nz)
-        out[_DEG * BATCH + k] = 1.0 if (a <= 1e-30) | (e <= 1e-30) else 0.0
+        out[_DEG * BATCH + k] = 1.0 if (a <= NO_LENGTH) | (e <= NO_LENGTH) else 0.0
 
 
 @njit(**BORROWED)
