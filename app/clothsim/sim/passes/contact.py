@@ -26,11 +26,11 @@ distance d each move less than d/2. In each substep:
    is outside too. Pinned points are never moved; their balls are
    checked in step 1 like every other point's.
 
-The broad phase hashes the axis-aligned boxes of the points, edges and triangles (each widened by
-half the query radius) into a uniform grid of cells, every box into every cell it overlaps, and
-tests a pair only in the one cell that holds the lower corner of the two boxes' intersection.
-It runs at a rebuild only: between rebuilds a substep costs three passes over the points and one
-over the stored pairs.
+The broad phase is a uniform grid of hashed cells, built at a rebuild only (:func:`rebuild` has
+the rule): the triangles' boxes, widened by the query radius, in every cell they overlap, read by
+each point in its own cell; each edge's box, widened by half of it, once in the cell of its lower
+corner, read by the other edges from the cells where an overlapping box can start. Between
+rebuilds a substep costs three passes over the points and one over the stored pairs.
 """
 
 from __future__ import annotations
@@ -247,8 +247,33 @@ def _cell(v: float, inv: float) -> np.int64:
 
 
 @njit(inline="always", **KERNEL)
-def _slot_of(key: np.int64, mask: np.uint64) -> np.int64:
-    return np.int64(((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> np.uint64(32)) & mask)
+def _slot_of(key: np.int64, shift: np.uint64) -> np.int64:
+    # Fibonacci hashing: the top bits of key x 2^64 / phi. (Bits 32 and up, masked, had cells that
+    # differ only in x, 16 cells apart, share a slot: a third of the edge-edge candidates read
+    # belonged to another cell.)
+    return np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
+
+
+@njit(inline="always", **KERNEL)
+def _table_size(entries: int) -> tuple[np.int64, np.uint64]:
+    """A power of two at least twice ``entries`` (and at least 2), and the shift that takes that
+    many slots' bits off the top of a 64-bit hash."""
+    table = np.int64(2)
+    bits = 1
+    while table < 2 * entries:
+        table *= 2
+        bits += 1
+    return table, np.uint64(64 - bits)
+
+
+@njit(inline="always", **KERNEL)
+def _shift_of(start: np.ndarray) -> np.uint64:
+    """The slot shift of a table whose starts are ``start`` (table + 1 long)."""
+    table = start.shape[0] - 1
+    bits = 0
+    while (np.int64(1) << bits) < table:
+        bits += 1
+    return np.uint64(64 - bits)
 
 
 @njit(**KERNEL)
@@ -263,10 +288,7 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
         ny = _cell(box[4, k], inv) - _cell(box[1, k], inv) + 1
         nz = _cell(box[5, k], inv) - _cell(box[2, k], inv) + 1
         total += nx * ny * nz
-    table = 1
-    while table < 2 * total:
-        table *= 2
-    mask = np.uint64(table - 1)
+    table, shift = _table_size(total)
     keys = np.empty(total, dtype=np.int64)
     ids = np.empty(total, dtype=np.int64)
     start = np.zeros(table + 1, dtype=np.int64)
@@ -281,7 +303,7 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
                     key = _cell_key(ix, iy, iz)
                     keys[i] = key
                     ids[i] = k
-                    start[_slot_of(key, mask)] += 1
+                    start[_slot_of(key, shift)] += 1
                     i += 1
     acc = 0
     for s in range(table):
@@ -293,7 +315,7 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
     sids = np.empty(total, dtype=np.int64)
     cursor = start[:table].copy()
     for j in range(total):
-        s = _slot_of(keys[j], mask)
+        s = _slot_of(keys[j], shift)
         skeys[cursor[s]] = keys[j]
         sids[cursor[s]] = ids[j]
         cursor[s] += 1
@@ -308,16 +330,13 @@ def corner_table(box: np.ndarray, cell: float) -> tuple:
     minus one to its upper corner's, along each axis."""
     m = box.shape[1]
     inv = 1.0 / cell
-    table = 1
-    while table < 2 * m:
-        table *= 2
-    mask = np.uint64(table - 1)
+    table, shift = _table_size(m)
     keys = np.empty(m, dtype=np.int64)
     start = np.zeros(table + 1, dtype=np.int64)
     for k in range(m):
         key = _cell_key(_cell(box[0, k], inv), _cell(box[1, k], inv), _cell(box[2, k], inv))
         keys[k] = key
-        start[_slot_of(key, mask)] += 1
+        start[_slot_of(key, shift)] += 1
     acc = 0
     for s in range(table):
         c = start[s]
@@ -328,7 +347,7 @@ def corner_table(box: np.ndarray, cell: float) -> tuple:
     sids = np.empty(m, dtype=np.int64)
     cursor = start[:table].copy()
     for k in range(m):
-        s = _slot_of(keys[k], mask)
+        s = _slot_of(keys[k], shift)
         skeys[cursor[s]] = keys[k]
         sids[cursor[s]] = k
         cursor[s] += 1
@@ -336,15 +355,15 @@ def corner_table(box: np.ndarray, cell: float) -> tuple:
 
 
 @njit(inline="always", **KERNEL)
-def _first_cell(box: np.ndarray, a: int, b: int, inv: float) -> np.int64:
-    """Key of the cell holding the lower corner of boxes a and b's intersection, or -1 when they
-    do not overlap."""
-    lx = max(box[0, a], box[0, b])
-    ly = max(box[1, a], box[1, b])
-    lz = max(box[2, a], box[2, b])
-    if lx > min(box[3, a], box[3, b]) or ly > min(box[4, a], box[4, b]) or lz > min(box[5, a], box[5, b]):
-        return np.int64(-1)
-    return _cell_key(_cell(lx, inv), _cell(ly, inv), _cell(lz, inv))
+def _after(ids: np.ndarray, lo: int, hi: int, e: int) -> int:
+    """The first index in [lo, hi) of increasing ``ids`` whose id is greater than ``e``."""
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if ids[mid] <= e:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 # ------------------------------------------------------------------------------------------------
@@ -647,11 +666,17 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     """
     n = x.shape[1]
     radius = c.radius
-    c.ref[:, :] = x
+    # (element by element: an array assigned to a slice compiles Numba's error-message string
+    # code, about 3 s of a cold start)
+    for ax in range(3):
+        for p in range(n):
+            c.ref[ax, p] = x[ax, p]
     dmin = np.full(n, radius)
     inv = 1.0 / c.cell
-    npt = 0
-    nee = 0
+    # (counters typed int64 from the start: a literal 0 has the callees below compiled a second
+    # time for the literal's type)
+    npt = np.int64(0)
+    nee = np.int64(0)
     # the pairs whose boxes overlap are tested a batch at a time (_triangles_batch, _segments_batch),
     # then taken in the order found, as _point_triangle and _edge_edge take them one by one
     tris = c.tris
@@ -659,14 +684,14 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     xin = np.empty(12 * BATCH)
     out = np.empty(7 * BATCH)
     pairs = np.empty(2 * BATCH, dtype=np.int64)
-    nb = 0
+    nb = np.int64(0)
     # point-triangle
     tbox = _element_boxes(x, c.tris, radius)
     start, ids, keys = cell_table(tbox, c.cell)
-    mask = np.uint64(start.shape[0] - 2)
+    shift = _shift_of(start)
     for p in range(n):
         key = _cell_key(_cell(x[0, p], inv), _cell(x[1, p], inv), _cell(x[2, p], inv))
-        s = _slot_of(key, mask)
+        s = _slot_of(key, shift)
         for i in range(start[s], start[s + 1]):
             if keys[i] != key:
                 continue
@@ -692,9 +717,9 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     for e in range(ne):
         ecell = max(ecell, ebox[3, e] - ebox[0, e], ebox[4, e] - ebox[1, e], ebox[5, e] - ebox[2, e])
     einv = 1.0 / ecell
-    nb = 0
+    nb = np.int64(0)
     start, ids, keys = corner_table(ebox, ecell)
-    mask = np.uint64(start.shape[0] - 2)
+    shift = _shift_of(start)
     for e1 in range(ne):
         x0, x1 = _cell(ebox[0, e1], einv) - 1, _cell(ebox[3, e1], einv)
         y0, y1 = _cell(ebox[1, e1], einv) - 1, _cell(ebox[4, e1], einv)
@@ -703,10 +728,12 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
             for iy in range(y0, y1 + 1):
                 for iz in range(z0, z1 + 1):
                     key = _cell_key(ix, iy, iz)
-                    s = _slot_of(key, mask)
-                    for i in range(start[s], start[s + 1]):
+                    s = _slot_of(key, shift)
+                    # a slot lists its edges in increasing order: start past e1 (only later edges
+                    # are tested, each pair once), in the order the whole slot would be read
+                    for i in range(_after(ids, start[s], start[s + 1], e1), start[s + 1]):
                         e2 = ids[i]
-                        if e2 <= e1 or keys[i] != key:
+                        if keys[i] != key:
                             continue
                         if (ebox[0, e2] > ebox[3, e1] or ebox[3, e2] < ebox[0, e1] or ebox[1, e2] > ebox[4, e1]
                                 or ebox[4, e2] < ebox[1, e1] or ebox[2, e2] > ebox[5, e1]
