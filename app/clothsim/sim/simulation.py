@@ -26,7 +26,7 @@ from .passes.contact import MOVING
 from .passes.colliders.mesh import MeshGroup, collide_address
 from .passes.colliders.moving import top_speed
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
-from .passes.contact import contact_group, response_reach
+from .passes.contact import contact_group, response_reach, restore_reference, snapshot_reference
 from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash
 
 #: The contact mode: a pass of its own (passes/contact.py), not a query of the hash.
@@ -388,6 +388,7 @@ class Simulation:
         self.integrator_state = None
         self._crossings_checked = False
         self._clock[:] = 0.0
+        self._forget_contacts()
         self._place_pins()
         self._pins_seen = self._pos[:, self._pins].copy()
 
@@ -451,16 +452,22 @@ class Simulation:
             self.run_kernel(steps, PASS_ALL, 1)
 
     def _restore(self, saved: tuple) -> None:
-        self._forget_contacts()
         self._pos[...] = saved[0]
         self._last[...] = saved[1]
         self.integrator_state = None if saved[2] is None else saved[2].copy()
         self._clock[:] = saved[3]
+        if saved[4] is not None:
+            restore_reference(self._kernel_args.contact, saved[4])
+
+    def _contact_snapshot(self) -> tuple | None:
+        # The contact pass keeps its reference from one frame to the next (a rebuild costs as much
+        # as many substeps), so a frame depends on the state it starts from and on that reference:
+        # a replay (blow-up guard, team given up) starts from a copy of both and gives the same bits.
+        contact = self._kernel_args.contact
+        return None if contact is None else snapshot_reference(contact)
 
     def _forget_contacts(self) -> None:
-        # The contact pass rebuilds its reference at the first substep of every frame, so a frame
-        # depends only on the state it starts from: a replay (blow-up guard, team given up) gives
-        # the same bits.
+        # (the next substep builds the reference afresh)
         contact = self._kernel_args.contact
         if contact is not None:
             contact.meta[0] = 0
@@ -468,12 +475,16 @@ class Simulation:
     def _contact_sweeps(self) -> None:
         # The contact response's strength for the frame: stronger while pins move (a pin track, or
         # pins put elsewhere through the API since the last frame), so the cloth makes way for them
-        # (see clothsim.sim.passes.contact.respond).
+        # (see clothsim.sim.passes.contact.respond). Such a frame also starts from a fresh
+        # reference, as every frame did before the reference was kept: the stress set's twist
+        # (pins put elsewhere each frame) crossed itself without (4 crossings at most on 16 x 16).
         contact = self._kernel_args.contact
         if contact is not None:
             moving = self._kernel_args.pins is not None or not np.array_equal(self._pos[:, self._pins],
                                                                               self._pins_seen)
             contact.meta[MOVING] = moving
+            if moving:
+                self._forget_contacts()
 
     def _check_crossings(self) -> None:
         # once per start: the contact mode keeps a cloth from crossing itself, but cannot undo
@@ -497,9 +508,9 @@ class Simulation:
         if self._kernel_args.contact is not None and not self._crossings_checked:
             self._check_crossings()
         state = self.integrator_state
-        saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy(), self._clock.copy())
-        self._forget_contacts()
         self._contact_sweeps()
+        saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy(), self._clock.copy(),
+                 self._contact_snapshot())
         steps = self.scene.simulation.simulation_steps
         run(steps, saved)
         if self._kernel_args.contact is not None:

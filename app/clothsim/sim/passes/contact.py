@@ -960,6 +960,26 @@ def contact_bound(pos: np.ndarray, c: Contact) -> None:
     bound(pos, c)
 
 
+def snapshot_reference(c: Contact) -> tuple:
+    """A copy of what the pass carries from one substep to the next (the reference, the balls,
+    the stored pairs, the counters), for :func:`restore_reference`."""
+    npt, nee = int(c.meta[N_PT]), int(c.meta[N_EE])
+    return (c.ref.copy(), c.rho2.copy(), c.pt[:, :npt].copy(), c.ptf[:, :npt].copy(), c.ee[:, :nee].copy(),
+            c.eef[:, :nee].copy(), c.meta.copy())
+
+
+def restore_reference(c: Contact, saved: tuple) -> None:
+    """Put back a :func:`snapshot_reference` (a frame replayed from its start)."""
+    ref, rho2, pt, ptf, ee, eef, meta = saved
+    c.ref[...] = ref
+    c.rho2[...] = rho2
+    c.pt[:, :pt.shape[1]] = pt
+    c.ptf[:, :ptf.shape[1]] = ptf
+    c.ee[:, :ee.shape[1]] = ee
+    c.eef[:, :eef.shape[1]] = eef
+    c.meta[...] = meta
+
+
 def response_reach(c: Contact) -> float:
     """The furthest the response moves a point in one substep: an average of pushes of at most
     the contact distance (plus friction), over a weight sum of at least 1/2."""
