@@ -16,7 +16,8 @@ distance d each move less than d/2. In each substep:
 1. (self-collision slot) if any point's position at the substep's start has left its ball, or
    its position after the integrator would (for a pin, or a free point whose ball is not tiny:
    ROOMY), the reference is rebuilt from the positions the substep started from (crossing-free,
-   by the same argument), and at the first substep of every frame;
+   by the same argument), and when there is none (the first substep, a frame whose pins move,
+   after ``reset``: the simulation clears ``meta[VALID]``);
 2. (self-collision slot) every stored pair closer than the contact distance is pushed apart along its reference normal
    (inelastically, plus a fraction of the overlap), with Coulomb friction on the pair's relative
    tangential motion; corrections are averaged per point (Jacobi, in pair order), in one sweep,
@@ -70,12 +71,14 @@ REACH = 1.5
 #: A point about to leave its ball calls for a new reference only if its ball is at least this
 #: fraction of the largest (GAMMA x the query radius): a point held a hair from another element
 #: would otherwise rebuild every substep and gain nothing; it waits, clamped, for the next rebuild
-#: (at the latest the next frame's first substep).
+#: (which another point's leaving, a frame whose pins move or a point found outside its ball at a
+#: substep's start calls for).
 ROOMY = 0.25
 
-# meta fields (MOVING: 1 in a frame whose pins move, set by the simulation)
-VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE, MOVING = 0, 1, 2, 3, 4, 5, 6
-META = 7
+# meta fields (MOVING: 1 in a frame whose pins move, set by the simulation; CLAMPED: 1 when the
+# bound has moved a point since the last rebuild)
+VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE, MOVING, CLAMPED = 0, 1, 2, 3, 4, 5, 6, 7
+META = 8
 
 
 class Contact(NamedTuple):
@@ -759,6 +762,7 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     c.meta[N_PT] = npt
     c.meta[N_EE] = nee
     c.meta[REBUILDS] += 1
+    c.meta[CLAMPED] = 0
 
 
 @njit(**KERNEL)
@@ -933,6 +937,7 @@ def bound(pos: np.ndarray, c: Contact) -> None:
             pos[0, p] = ref[0, p] + dx * f
             pos[1, p] = ref[1, p] + dy * f
             pos[2, p] = ref[2, p] + dz * f
+            c.meta[CLAMPED] = 1
 
 
 @njit(**EXACT)
