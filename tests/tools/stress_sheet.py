@@ -48,7 +48,7 @@ def run_cells(renderer: Renderer, scene: str, mode: str, grid: int, frames: list
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("out", nargs="?", default=str(Path(__file__).resolve().parents[2] / "docs/images/stress_sheet.png"))
-    p.add_argument("--grid", type=int, default=40)
+    p.add_argument("--grid", type=int, default=50)
     p.add_argument("--frames", default="60,150,300")
     args = p.parse_args()
     frames = [int(f) for f in args.frames.split(",")]
