@@ -23,7 +23,7 @@ from clothsim.sim import Simulation
 from clothsim.sim.profile import Profiler
 from clothsim.sim.solvers.frame import PASS_ALL
 
-from clothsim.jit import EXACT, KERNEL
+from clothsim.jit import EXACT
 from clothsim.sim.crossings import count_crossings
 from clothsim.sim.passes.contact import _edge_edge, _point_triangle
 
@@ -217,9 +217,10 @@ def test_no_pair_is_held_closer_than_the_floor() -> None:
     assert floor <= min(gaps) < 1.01 * floor
 
 
-@njit(**KERNEL)
+@njit(**EXACT)
 def _every_pair(x: np.ndarray, c) -> np.ndarray:  # noqa: ANN001
-    """The reference by brute force: every point-triangle and edge-edge pair tested, in order."""
+    """The reference by brute force: every point-triangle and edge-edge pair tested, in order, in
+    IEEE order (as the rebuild's tests are compiled)."""
     dmin = np.full(x.shape[1], c.radius)
     npt = 0
     for p in range(x.shape[1]):
@@ -254,31 +255,13 @@ def test_the_broad_phase_finds_every_pair_brute_force_finds(frames: int) -> None
     assert np.sum(dmin < c.radius) > 10 and ((npt > 10 and nee > 10) if frames == 60 else True)
     for got_ids, got_f, want_ids, want_f, k, width in ((c.pt, c.ptf, want.pt, want.ptf, npt, c.tris.shape[1]),
                                                       (c.ee, c.eef, want.ee, want.eef, nee, c.edges.shape[1])):
-        # (pairs in the order brute force finds them; the same arithmetic, compiled in another
-        # function: contracted multiply-adds may round apart)
+        # (pairs in the order brute force finds them)
         order = np.argsort(got_ids[0, :k] * width + got_ids[1, :k])
         assert np.array_equal(got_ids[:, :k][:, order], want_ids[:, :k])
         assert np.allclose(got_f[:, :k][:, order], want_f[:, :k], rtol=0, atol=1e-12)
     r = GAMMA * np.maximum(dmin - FLOOR * c.thickness, 0.0)
     assert np.allclose(c.rho2, r * r, rtol=1e-9, atol=0)
 
-
-
-@njit(**EXACT)
-def _every_pair_exact(x: np.ndarray, c) -> np.ndarray:  # noqa: ANN001
-    """:func:`_every_pair` in IEEE order, as the rebuild's batched tests are compiled."""
-    dmin = np.full(x.shape[1], c.radius)
-    npt = 0
-    for p in range(x.shape[1]):
-        for t in range(c.tris.shape[1]):
-            npt = _point_triangle(x, c, p, t, dmin, npt)
-    nee = 0
-    for e1 in range(c.edges.shape[1]):
-        for e2 in range(e1 + 1, c.edges.shape[1]):
-            nee = _edge_edge(x, c, e1, e2, dmin, nee)
-    c.meta[1] = npt
-    c.meta[2] = nee
-    return dmin
 
 
 def test_the_batched_tests_give_the_one_at_a_time_tests_bits() -> None:
@@ -292,7 +275,7 @@ def test_the_batched_tests_give_the_one_at_a_time_tests_bits() -> None:
     c = sim._kernel_args.contact
     rebuild(x, c)
     want = contact_group(x, c.tris, c.movable, sim.scene.cloth.thickness)
-    dmin = _every_pair_exact(x, want)
+    dmin = _every_pair(x, want)
     npt, nee = int(c.meta[1]), int(c.meta[2])
     assert (npt, nee) == (int(want.meta[1]), int(want.meta[2])) and npt > 10 and nee > 10
     for got_ids, got_f, want_ids, want_f, k, width in ((c.pt, c.ptf, want.pt, want.ptf, npt, c.tris.shape[1]),

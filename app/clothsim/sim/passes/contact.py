@@ -258,21 +258,17 @@ def _slot_of(key: np.int64, shift: np.uint64) -> np.int64:
 
 
 @njit(inline="always", **KERNEL)
-def _table_size(entries: int) -> tuple[np.int64, np.uint64]:
-    """A power of two at least twice ``entries`` (and at least 2), and the shift that takes that
-    many slots' bits off the top of a 64-bit hash."""
+def _table_size(entries: int) -> np.int64:
+    """Slots for a table of ``entries``: a power of two at least twice as many, and at least 2."""
     table = np.int64(2)
-    bits = 1
     while table < 2 * entries:
         table *= 2
-        bits += 1
-    return table, np.uint64(64 - bits)
+    return table
 
 
 @njit(inline="always", **KERNEL)
-def _shift_of(start: np.ndarray) -> np.uint64:
-    """The slot shift of a table whose starts are ``start`` (table + 1 long)."""
-    table = start.shape[0] - 1
+def _shift_of(table: int) -> np.uint64:
+    """The shift that takes a power-of-two ``table``'s bits off the top of a 64-bit hash."""
     bits = 0
     while (np.int64(1) << bits) < table:
         bits += 1
@@ -291,7 +287,8 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
         ny = _cell(box[4, k], inv) - _cell(box[1, k], inv) + 1
         nz = _cell(box[5, k], inv) - _cell(box[2, k], inv) + 1
         total += nx * ny * nz
-    table, shift = _table_size(total)
+    table = _table_size(total)
+    shift = _shift_of(table)
     keys = np.empty(total, dtype=np.int64)
     ids = np.empty(total, dtype=np.int64)
     start = np.zeros(table + 1, dtype=np.int64)
@@ -333,7 +330,8 @@ def corner_table(box: np.ndarray, cell: float) -> tuple:
     minus one to its upper corner's, along each axis."""
     m = box.shape[1]
     inv = 1.0 / cell
-    table, shift = _table_size(m)
+    table = _table_size(m)
+    shift = _shift_of(table)
     keys = np.empty(m, dtype=np.int64)
     start = np.zeros(table + 1, dtype=np.int64)
     for k in range(m):
@@ -691,7 +689,7 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     # point-triangle
     tbox = _element_boxes(x, c.tris, radius)
     start, ids, keys = cell_table(tbox, c.cell)
-    shift = _shift_of(start)
+    shift = _shift_of(start.shape[0] - 1)
     for p in range(n):
         key = _cell_key(_cell(x[0, p], inv), _cell(x[1, p], inv), _cell(x[2, p], inv))
         s = _slot_of(key, shift)
@@ -722,7 +720,7 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     einv = 1.0 / ecell
     nb = np.int64(0)
     start, ids, keys = corner_table(ebox, ecell)
-    shift = _shift_of(start)
+    shift = _shift_of(start.shape[0] - 1)
     for e1 in range(ne):
         x0, x1 = _cell(ebox[0, e1], einv) - 1, _cell(ebox[3, e1], einv)
         y0, y1 = _cell(ebox[1, e1], einv) - 1, _cell(ebox[4, e1], einv)
