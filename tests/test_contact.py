@@ -225,11 +225,11 @@ def _every_pair(x: np.ndarray, c) -> np.ndarray:  # noqa: ANN001
     npt = 0
     for p in range(x.shape[1]):
         for t in range(c.tris.shape[1]):
-            npt = _point_triangle(x, c, p, t, dmin, npt)
+            npt = _point_triangle(x, c, p, t, dmin, npt, c.pt.shape[1])
     nee = 0
     for e1 in range(c.edges.shape[1]):
         for e2 in range(e1 + 1, c.edges.shape[1]):
-            nee = _edge_edge(x, c, e1, e2, dmin, nee)
+            nee = _edge_edge(x, c, e1, e2, dmin, nee, c.ee.shape[1])
     c.meta[1] = npt
     c.meta[2] = nee
     return dmin
@@ -285,6 +285,69 @@ def test_the_batched_tests_give_the_one_at_a_time_tests_bits() -> None:
         assert np.array_equal(got_f[:, :k][:, order], want_f[:, :k])
     r = GAMMA * np.maximum(dmin - FLOOR * c.thickness, 0.0)
     assert np.array_equal(c.rho2, r * r)
+
+def _joined(x: np.ndarray, c, members: int) -> tuple:  # noqa: ANN001
+    """A rebuild searched by ``members`` members, each its parts, then joined: what it stored, and
+    whether a part found more pairs than its share of the arrays holds."""
+    from clothsim.sim.passes.contact import DROPPED, N_EE, N_PT, contact_search, contact_stale, join
+
+    flags = [np.zeros(4, np.int64) for _ in range(members)]
+    for m, flag in enumerate(flags):  # every member decides before any searches (as in the team)
+        contact_stale(x, x, c, flag, m, members)
+    assert flags[0][1] == 0 and flags[-1][2] == len(c.cost)
+    assert all(a[2] == b[1] for a, b in zip(flags, flags[1:]))  # each part searched once
+    for m, flag in enumerate(flags):
+        contact_search(x, c, flag, m)
+    parts = len(c.cost)
+    over = any(c.found[k, 0] > (k + 1) * c.pt.shape[1] // parts - k * c.pt.shape[1] // parts
+               or c.found[k, 1] > (k + 1) * c.ee.shape[1] // parts - k * c.ee.shape[1] // parts for k in range(parts))
+    join(x, c, parts, members)
+    npt, nee = int(c.meta[N_PT]), int(c.meta[N_EE])
+    return (c.pt[:, :npt].copy(), c.ptf[:, :npt].copy(), c.ee[:, :nee].copy(), c.eef[:, :nee].copy(),
+            c.rho2.copy(), int(c.meta[DROPPED])), over
+
+
+@pytest.mark.parametrize("room", ["shares", "all", "half"])
+def test_a_rebuild_searched_in_parts_by_the_team_stores_what_one_sweep_stores(room: str) -> None:
+    # the team's members search their parts of a rebuild side by side and the first joins them:
+    # the same pairs in the same order, the same balls, bit for bit, as one sweep over every
+    # part, for one to three members and with the parts shared out by the last rebuild's costs;
+    # with pair arrays that hold all the pairs but not a part's in its share (the whole rebuild
+    # searched again as one part), or half the pairs (the rest dropped, as one sweep drops them)
+    from clothsim.sim.passes.contact import contact_group, join, search
+
+    sim = Simulation(self_collision_scene(20))
+    sim.step(60)
+    x = np.ascontiguousarray(sim.positions.T)
+    c = sim._kernel_args.contact
+    if room != "shares":
+        search(x, c, 0, 1, 1, 0)
+        join(x, c, 1, 1)
+        npt, nee = (int(c.meta[1]), int(c.meta[2])) if room == "all" else (int(c.meta[1]) // 2, int(c.meta[2]) // 2)
+        c = c._replace(pt=np.zeros((2, npt), np.int64), ptf=np.zeros((6, npt)), ee=np.zeros((2, nee), np.int64),
+                       eef=np.zeros((5, nee)))
+
+    def fresh():  # noqa: ANN202
+        return c._replace(meta=np.zeros_like(c.meta), found=np.zeros_like(c.found), cost=np.zeros_like(c.cost),
+                          dmins=np.zeros_like(c.dmins))
+
+    one = fresh()
+    search(x, one, 0, 1, 1, 0)
+    join(x, one, 1, 1)
+    want = (one.pt[:, :one.meta[1]], one.ptf[:, :one.meta[1]], one.ee[:, :one.meta[2]], one.eef[:, :one.meta[2]],
+            one.rho2, int(one.meta[4]))
+    assert want[0].shape[1] > 5 and want[2].shape[1] > 10
+    assert (want[5] > 0) == (room == "half")
+    for members in (1, 2, 3):
+        team = fresh()
+        for _ in range(2):  # equal shares of the parts, then shares by the first rebuild's costs
+            got, over = _joined(x, team, members)
+            assert over == (room != "shares")
+            for a, b in zip(got, want):
+                assert np.array_equal(a, b)
+            team.meta[4] = 0
+    assert contact_group(x, c.tris, c.movable, 0.01).cost.sum() == 0
+
 
 def test_a_pin_that_leaves_a_small_ball_is_counted_in_that_substep() -> None:
     # A pin 1 mm above a free triangle (a ball of 0.45 mm, far below ROOMY's) driven 2 mm down in

@@ -41,7 +41,8 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...jit import BORROWED, EXACT, KERNEL
+from ...jit import BORROWED, CHUNKS, EXACT, KERNEL
+from ..team import share
 from .selfcollide import _cell_key
 
 #: Fraction of the distance to the nearest other element a point may move from its reference.
@@ -74,6 +75,10 @@ REACH = 1.5
 #: (which another point's leaving, a frame whose pins move or a point found outside its ball at a
 #: substep's start calls for).
 ROOMY = 0.25
+#: Parts a rebuild is cut into, each a contiguous range of points and of edges with its own share
+#: of the pair arrays: the thread team's members search as many parts each as costs them alike
+#: (the previous rebuild's costs), and the bits do not depend on who searched which.
+PARTS = 32
 
 # meta fields (MOVING: 1 in a frame whose pins move, set by the simulation; CLAMPED: 1 when the
 # bound has moved a point since the last rebuild)
@@ -85,8 +90,9 @@ class Contact(NamedTuple):
     """The contact pass's arrays: the mesh (triangles (3, T), edges (2, E)), the movable mask, the
     reference state (3, N) and each point's squared ball radius, the stored pairs (point-triangle:
     indices (2, P) and weights + normal (6, P); edge-edge: indices (2, Q) and parameters + normal
-    (5, Q)), the Jacobi sums, ``meta`` counters (see VALID ... UNSAFE), the contact distance, the
-    query radius and the broad phase's cell edge."""
+    (5, Q)), the Jacobi sums, ``meta`` counters (see VALID ... UNSAFE), a rebuild's work space
+    (each member's bounds on the balls, each part's pairs found and cost, see :func:`search`), the
+    contact distance, the query radius and the broad phase's cell edge."""
 
     tris: np.ndarray
     edges: np.ndarray
@@ -100,6 +106,9 @@ class Contact(NamedTuple):
     acc: np.ndarray
     cnt: np.ndarray
     meta: np.ndarray
+    dmins: np.ndarray
+    found: np.ndarray
+    cost: np.ndarray
     thickness: float
     radius: float
     cell: float
@@ -127,7 +136,8 @@ def contact_group(pos: np.ndarray, tris: np.ndarray, movable: np.ndarray, thickn
     return Contact(tris, edges, np.ascontiguousarray(movable, dtype=np.bool_), np.zeros((3, n)), np.zeros(n),
                    np.zeros((2, cap), dtype=np.int64), np.zeros((6, cap)), np.zeros((2, cap), dtype=np.int64),
                    np.zeros((5, cap)), np.zeros((3, n)), np.zeros(n, dtype=np.int64), np.zeros(META, dtype=np.int64),
-                   h, radius, max(radius, 2.0 * float(np.median(lengths))))
+                   np.zeros((CHUNKS, n)), np.zeros((PARTS, 2), dtype=np.int64), np.zeros(PARTS, dtype=np.int64), h,
+                   radius, max(radius, 2.0 * float(np.median(lengths))))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -275,6 +285,17 @@ def _shift_of(table: int) -> np.uint64:
     return np.uint64(64 - bits)
 
 
+@njit(inline="always", **KERNEL)
+def _slot_ends(start: np.ndarray, table: int) -> None:
+    """Each slot's count in ``start`` (table + 1,) made the end of its run of entries (the last
+    entry too)."""
+    acc = start[0]
+    for s in range(1, table):
+        acc += start[s]
+        start[s] = acc
+    start[table] = acc
+
+
 @njit(**KERNEL)
 def cell_table(box: np.ndarray, cell: float) -> tuple:
     """Every box in every cell it overlaps, counting-sorted by hash slot: (start (table + 1,),
@@ -305,20 +326,17 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
                     ids[i] = k
                     start[_slot_of(key, shift)] += 1
                     i += 1
-    acc = 0
-    for s in range(table):
-        c = start[s]
-        start[s] = acc
-        acc += c
-    start[table] = acc
+    _slot_ends(start, table)
     skeys = np.empty(total, dtype=np.int64)
     sids = np.empty(total, dtype=np.int64)
-    cursor = start[:table].copy()
-    for j in range(total):
+    # (placed from the last entry back, each slot filled from its end: a slot's entries keep
+    # their order, and start ends up at each slot's first; 5x faster on a flat 50 x 50 cloth
+    # than a copy of the starts as cursors, for a reason not pinned down)
+    for j in range(total - 1, -1, -1):
         s = _slot_of(keys[j], shift)
-        skeys[cursor[s]] = keys[j]
-        sids[cursor[s]] = ids[j]
-        cursor[s] += 1
+        start[s] -= 1
+        skeys[start[s]] = keys[j]
+        sids[start[s]] = ids[j]
     return start, sids, skeys
 
 
@@ -338,20 +356,14 @@ def corner_table(box: np.ndarray, cell: float) -> tuple:
         key = _cell_key(_cell(box[0, k], inv), _cell(box[1, k], inv), _cell(box[2, k], inv))
         keys[k] = key
         start[_slot_of(key, shift)] += 1
-    acc = 0
-    for s in range(table):
-        c = start[s]
-        start[s] = acc
-        acc += c
-    start[table] = acc
+    _slot_ends(start, table)
     skeys = np.empty(m, dtype=np.int64)
     sids = np.empty(m, dtype=np.int64)
-    cursor = start[:table].copy()
-    for k in range(m):
+    for k in range(m - 1, -1, -1):  # (as in cell_table)
         s = _slot_of(keys[k], shift)
-        skeys[cursor[s]] = keys[k]
-        sids[cursor[s]] = k
-        cursor[s] += 1
+        start[s] -= 1
+        skeys[start[s]] = keys[k]
+        sids[start[s]] = k
     return start, sids, skeys
 
 
@@ -373,9 +385,10 @@ def _after(ids: np.ndarray, lo: int, hi: int, e: int) -> int:
 
 @njit(inline="always", **EXACT)
 def _keep_pt(c: Contact, p: int, t: int, wa: float, wb: float, wc: float, nx: float, ny: float, nz: float, d: float,
-             dmin: np.ndarray, npt: int) -> int:
+             dmin: np.ndarray, npt: int, end: int) -> int:
     """A point-triangle pair at distance ``d`` (weights, unnormalised normal): the balls of its
-    points bounded by it, and stored if within the contact distance; returns the pairs stored."""
+    points bounded by it, and stored at column ``npt`` if within the contact distance (written
+    only below column ``end``); returns the pairs kept so far, written or not."""
     if d >= c.radius:
         return npt
     tris = c.tris
@@ -386,7 +399,7 @@ def _keep_pt(c: Contact, p: int, t: int, wa: float, wb: float, wc: float, nx: fl
     dmin[cc] = min(dmin[cc], d)
     # (a pair further than the contact distance only bounds the motion; the response would skip it)
     if 0.0 < d < c.thickness:
-        if npt < c.pt.shape[1]:
+        if npt < end:
             c.pt[0, npt] = p
             c.pt[1, npt] = t
             c.ptf[0, npt] = wa
@@ -395,15 +408,14 @@ def _keep_pt(c: Contact, p: int, t: int, wa: float, wb: float, wc: float, nx: fl
             c.ptf[3, npt] = nx / d
             c.ptf[4, npt] = ny / d
             c.ptf[5, npt] = nz / d
-            return npt + 1
-        c.meta[DROPPED] += 1
+        return npt + 1
     return npt
 
 
 @njit(inline="always", **EXACT)
-def _point_triangle(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray, npt: int) -> int:
-    """Test one point-triangle pair; returns the pairs stored (npt, or npt + 1). (The rebuild tests
-    its pairs in batches, :func:`_triangles_batch`, with the same bits.)"""
+def _point_triangle(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray, npt: int, end: int) -> int:
+    """Test one point-triangle pair; returns the pairs kept (npt, or npt + 1; see :func:`_keep_pt`).
+    (The rebuild tests its pairs in batches, :func:`_triangles_batch`, with the same bits.)"""
     tris = c.tris
     a, b, cc = tris[0, t], tris[1, t], tris[2, t]
     if p == a or p == b or p == cc:
@@ -414,14 +426,14 @@ def _point_triangle(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray,
     ny = x[1, p] - (wa * x[1, a] + wb * x[1, b] + wc * x[1, cc])
     nz = x[2, p] - (wa * x[2, a] + wb * x[2, b] + wc * x[2, cc])
     d = np.sqrt(nx * nx + ny * ny + nz * nz)
-    return _keep_pt(c, p, t, wa, wb, wc, nx, ny, nz, d, dmin, npt)
+    return _keep_pt(c, p, t, wa, wb, wc, nx, ny, nz, d, dmin, npt, end)
 
 
 @njit(inline="always", **EXACT)
 def _keep_ee(c: Contact, e1: int, e2: int, u: float, v: float, nx: float, ny: float, nz: float, d: float,
-             dmin: np.ndarray, nee: int) -> int:
+             dmin: np.ndarray, nee: int, end: int) -> int:
     """An edge-edge pair at distance ``d`` (segment parameters, unnormalised normal), as
-    :func:`_keep_pt`; returns the pairs stored."""
+    :func:`_keep_pt`; returns the pairs kept."""
     if d >= c.radius:
         return nee
     edges = c.edges
@@ -432,7 +444,7 @@ def _keep_ee(c: Contact, e1: int, e2: int, u: float, v: float, nx: float, ny: fl
     dmin[p2] = min(dmin[p2], d)
     dmin[q2] = min(dmin[q2], d)
     if 0.0 < d < c.thickness:
-        if nee < c.ee.shape[1]:
+        if nee < end:
             c.ee[0, nee] = e1
             c.ee[1, nee] = e2
             c.eef[0, nee] = u
@@ -440,14 +452,13 @@ def _keep_ee(c: Contact, e1: int, e2: int, u: float, v: float, nx: float, ny: fl
             c.eef[2, nee] = nx / d
             c.eef[3, nee] = ny / d
             c.eef[4, nee] = nz / d
-            return nee + 1
-        c.meta[DROPPED] += 1
+        return nee + 1
     return nee
 
 
 @njit(inline="always", **EXACT)
-def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, nee: int) -> int:
-    """Test one edge-edge pair; returns the pairs stored. (The rebuild tests its pairs in batches,
+def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, nee: int, end: int) -> int:
+    """Test one edge-edge pair; returns the pairs kept (see :func:`_keep_pt`). (The rebuild tests its pairs in batches,
     :func:`_segments_batch`, with the same bits; this one takes the pairs with an edge of no
     length.)"""
     edges = c.edges
@@ -461,11 +472,13 @@ def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, ne
     ny = (x[1, p1] + u * (x[1, q1] - x[1, p1])) - (x[1, p2] + v * (x[1, q2] - x[1, p2]))
     nz = (x[2, p1] + u * (x[2, q1] - x[2, p1])) - (x[2, p2] + v * (x[2, q2] - x[2, p2]))
     d = np.sqrt(nx * nx + ny * ny + nz * nz)
-    return _keep_ee(c, e1, e2, u, v, nx, ny, nz, d, dmin, nee)
+    return _keep_ee(c, e1, e2, u, v, nx, ny, nz, d, dmin, nee, end)
 
 
 #: Pairs a rebuild collects before testing them together (see :func:`rebuild`).
 BATCH = 256
+#: What a pair's test costs a rebuild, in entries of a cell read (for sharing the parts out).
+TEST_COST = 4
 
 
 @njit(inline="always", **EXACT)
@@ -538,18 +551,18 @@ def _segments_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
 
 @njit(**BORROWED)
 def _settle_ee(x: np.ndarray, c: Contact, pairs: np.ndarray, out: np.ndarray, n: int, dmin: np.ndarray,
-               nee: int) -> int:
+               nee: int, end: int) -> int:
     """The batch's pairs, in order, as :func:`_edge_edge` takes them one by one; returns the pairs
-    stored."""
+    kept."""
     for k in range(n):
         e1 = pairs[k]
         e2 = pairs[BATCH + k]
         if out[_DEG * BATCH + k] != 0.0:
-            nee = _edge_edge(x, c, e1, e2, dmin, nee)
+            nee = _edge_edge(x, c, e1, e2, dmin, nee, end)
         else:
             nx, ny, nz = _get3(out, _N, k)
             nee = _keep_ee(c, e1, e2, out[_S * BATCH + k], out[_T * BATCH + k], nx, ny, nz, out[_D * BATCH + k],
-                           dmin, nee)
+                           dmin, nee, end)
     return nee
 
 
@@ -623,13 +636,13 @@ def _triangles_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
 
 
 @njit(**BORROWED)
-def _settle_pt(c: Contact, pairs: np.ndarray, out: np.ndarray, n: int, dmin: np.ndarray, npt: int) -> int:
+def _settle_pt(c: Contact, pairs: np.ndarray, out: np.ndarray, n: int, dmin: np.ndarray, npt: int, end: int) -> int:
     """The batch's pairs, in order, as :func:`_point_triangle` takes them one by one; returns the
-    pairs stored."""
+    pairs kept."""
     for k in range(n):
         wa, wb, wc = _get3(out, _W, k)
         nx, ny, nz = _get3(out, _PN, k)
-        npt = _keep_pt(c, pairs[k], pairs[BATCH + k], wa, wb, wc, nx, ny, nz, out[_PD * BATCH + k], dmin, npt)
+        npt = _keep_pt(c, pairs[k], pairs[BATCH + k], wa, wb, wc, nx, ny, nz, out[_PD * BATCH + k], dmin, npt, end)
     return npt
 
 
@@ -653,9 +666,12 @@ def _element_boxes(x: np.ndarray, ids: np.ndarray, pad: float) -> np.ndarray:
 
 
 @njit(**EXACT)
-def rebuild(x: np.ndarray, c: Contact) -> None:
-    """Make ``x`` (3, N) the reference: find every point-triangle and edge-edge pair closer than
-    the query radius, store them, and give each point its ball.
+def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) -> None:
+    """Parts ``lo`` to ``hi`` (of ``parts``) of a rebuild from ``x`` (3, N): every point-triangle
+    and edge-edge pair closer than the query radius among each part's points and edges, stored in
+    the part's share of the pair arrays (columns ``share(capacity, part, parts)``), its pair
+    counts in its row of ``found`` and its cost (entries read, pairs tested) in ``cost``; the
+    balls' bounds in row ``row`` of ``dmins`` (:func:`join` puts the parts together).
 
     Point-triangle: the triangles' boxes, widened by the radius, go into every cell they overlap;
     each point reads its own cell (a triangle is listed once per cell: no pair twice). Edge-edge:
@@ -663,104 +679,183 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     (cells at least as large as every box); each edge reads the cells where an overlapping box
     can have its lower corner and tests the later edges found there. The pairs found are tested
     ``BATCH`` at a time (:func:`_triangles_batch`, :func:`_segments_batch`), with the bits of
-    :func:`_point_triangle` and :func:`_edge_edge`, and taken in the order found.
+    :func:`_point_triangle` and :func:`_edge_edge`, and taken in the order found. A part's points
+    and edges are a contiguous range, so the parts' pairs, one part after another, are the pairs
+    one sweep over all of them finds, in its order.
     """
     n = x.shape[1]
     radius = c.radius
-    # (element by element: an array assigned to a slice compiles Numba's error-message string
-    # code, about 3 s of a cold start)
-    for ax in range(3):
-        for p in range(n):
-            c.ref[ax, p] = x[ax, p]
-    dmin = np.full(n, radius)
     inv = 1.0 / c.cell
-    # (counters typed int64 from the start: a literal 0 has the callees below compiled a second
-    # time for the literal's type)
-    npt = np.int64(0)
-    nee = np.int64(0)
-    # the pairs whose boxes overlap are tested a batch at a time (_triangles_batch, _segments_batch),
-    # then taken in the order found, as _point_triangle and _edge_edge take them one by one
     tris = c.tris
     edges = c.edges
     xin = np.empty(12 * BATCH)
     out = np.empty(7 * BATCH)
     pairs = np.empty(2 * BATCH, dtype=np.int64)
-    nb = np.int64(0)
-    # point-triangle
+    # the tables, once for the parts this call runs
     tbox = _element_boxes(x, c.tris, radius)
     start, ids, keys = cell_table(tbox, c.cell)
     shift = _shift_of(start.shape[0] - 1)
-    for p in range(n):
-        key = _cell_key(_cell(x[0, p], inv), _cell(x[1, p], inv), _cell(x[2, p], inv))
-        s = _slot_of(key, shift)
-        for i in range(start[s], start[s + 1]):
-            if keys[i] != key:
-                continue
-            t = ids[i]
-            if (x[0, p] < tbox[0, t] or x[0, p] > tbox[3, t] or x[1, p] < tbox[1, t] or x[1, p] > tbox[4, t]
-                    or x[2, p] < tbox[2, t] or x[2, p] > tbox[5, t]):
-                continue
-            a, b, cc = tris[0, t], tris[1, t], tris[2, t]
-            if p == a or p == b or p == cc:
-                continue
-            nb = _add_pair(xin, pairs, nb, x, p, a, b, cc, p, t)
-            if nb == BATCH:
-                _triangles_batch(xin, out, nb)
-                npt = _settle_pt(c, pairs, out, nb, dmin, npt)
-                nb = 0
-    if nb > 0:
-        _triangles_batch(xin, out, nb)
-        npt = _settle_pt(c, pairs, out, nb, dmin, npt)
-    # edge-edge: each edge once, in its lower corner's cell (cells as large as the largest box)
     ebox = _element_boxes(x, c.edges, 0.5 * radius)
     ne = ebox.shape[1]
     ecell = c.cell
     for e in range(ne):
         ecell = max(ecell, ebox[3, e] - ebox[0, e], ebox[4, e] - ebox[1, e], ebox[5, e] - ebox[2, e])
     einv = 1.0 / ecell
-    nb = np.int64(0)
-    start, ids, keys = corner_table(ebox, ecell)
-    shift = _shift_of(start.shape[0] - 1)
-    for e1 in range(ne):
-        x0, x1 = _cell(ebox[0, e1], einv) - 1, _cell(ebox[3, e1], einv)
-        y0, y1 = _cell(ebox[1, e1], einv) - 1, _cell(ebox[4, e1], einv)
-        z0, z1 = _cell(ebox[2, e1], einv) - 1, _cell(ebox[5, e1], einv)
-        for ix in range(x0, x1 + 1):
-            for iy in range(y0, y1 + 1):
-                for iz in range(z0, z1 + 1):
-                    key = _cell_key(ix, iy, iz)
-                    s = _slot_of(key, shift)
-                    # a slot lists its edges in increasing order: start past e1 (only later edges
-                    # are tested, each pair once), in the order the whole slot would be read
-                    for i in range(_after(ids, start[s], start[s + 1], e1), start[s + 1]):
-                        e2 = ids[i]
-                        if keys[i] != key:
-                            continue
-                        if (ebox[0, e2] > ebox[3, e1] or ebox[3, e2] < ebox[0, e1] or ebox[1, e2] > ebox[4, e1]
-                                or ebox[4, e2] < ebox[1, e1] or ebox[2, e2] > ebox[5, e1]
-                                or ebox[5, e2] < ebox[2, e1]):
-                            continue
-                        p1, q1 = edges[0, e1], edges[1, e1]
-                        p2, q2 = edges[0, e2], edges[1, e2]
-                        if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
-                            continue
-                        nb = _add_pair(xin, pairs, nb, x, p1, q1, p2, q2, e1, e2)
-                        if nb == BATCH:
-                            _segments_batch(xin, out, nb)
-                            nee = _settle_ee(x, c, pairs, out, nb, dmin, nee)
-                            nb = 0
-    if nb > 0:
-        _segments_batch(xin, out, nb)
-        nee = _settle_ee(x, c, pairs, out, nb, dmin, nee)
-    floor = FLOOR * c.thickness
+    estart, eids, ekeys = corner_table(ebox, ecell)
+    eshift = _shift_of(estart.shape[0] - 1)
+    dmin = c.dmins[row]
     for p in range(n):
-        r = GAMMA * max(dmin[p] - floor, 0.0)
+        dmin[p] = radius
+    for part in range(lo, hi):
+        # (counters typed int64 from the start, as share's are: a literal 0 has the callees below
+        # compiled a second time for the literal's type)
+        pt_first, pt_end = share(c.pt.shape[1], part, parts)
+        npt = pt_first
+        nb = np.int64(0)
+        p0, p1 = share(n, part, parts)
+        cost = np.int64(0)
+        for p in range(p0, p1):
+            key = _cell_key(_cell(x[0, p], inv), _cell(x[1, p], inv), _cell(x[2, p], inv))
+            s = _slot_of(key, shift)
+            cost += start[s + 1] - start[s]
+            for i in range(start[s], start[s + 1]):
+                if keys[i] != key:
+                    continue
+                t = ids[i]
+                if (x[0, p] < tbox[0, t] or x[0, p] > tbox[3, t] or x[1, p] < tbox[1, t] or x[1, p] > tbox[4, t]
+                        or x[2, p] < tbox[2, t] or x[2, p] > tbox[5, t]):
+                    continue
+                a, b, cc = tris[0, t], tris[1, t], tris[2, t]
+                if p == a or p == b or p == cc:
+                    continue
+                nb = _add_pair(xin, pairs, nb, x, p, a, b, cc, p, t)
+                cost += TEST_COST
+                if nb == BATCH:
+                    _triangles_batch(xin, out, nb)
+                    npt = _settle_pt(c, pairs, out, nb, dmin, npt, pt_end)
+                    nb = 0
+        if nb > 0:
+            _triangles_batch(xin, out, nb)
+            npt = _settle_pt(c, pairs, out, nb, dmin, npt, pt_end)
+        # edge-edge: each edge once, in its lower corner's cell (cells as large as the largest box)
+        ee_first, ee_end = share(c.ee.shape[1], part, parts)
+        nee = ee_first
+        nb = np.int64(0)
+        f0, f1 = share(ne, part, parts)
+        for e1 in range(f0, f1):
+            x0, x1 = _cell(ebox[0, e1], einv) - 1, _cell(ebox[3, e1], einv)
+            y0, y1 = _cell(ebox[1, e1], einv) - 1, _cell(ebox[4, e1], einv)
+            z0, z1 = _cell(ebox[2, e1], einv) - 1, _cell(ebox[5, e1], einv)
+            for ix in range(x0, x1 + 1):
+                for iy in range(y0, y1 + 1):
+                    for iz in range(z0, z1 + 1):
+                        key = _cell_key(ix, iy, iz)
+                        s = _slot_of(key, eshift)
+                        # a slot lists its edges in increasing order: start past e1 (only later edges
+                        # are tested, each pair once), in the order the whole slot would be read
+                        first = _after(eids, estart[s], estart[s + 1], e1)
+                        cost += estart[s + 1] - first + 1
+                        for i in range(first, estart[s + 1]):
+                            e2 = eids[i]
+                            if ekeys[i] != key:
+                                continue
+                            if (ebox[0, e2] > ebox[3, e1] or ebox[3, e2] < ebox[0, e1] or ebox[1, e2] > ebox[4, e1]
+                                    or ebox[4, e2] < ebox[1, e1] or ebox[2, e2] > ebox[5, e1]
+                                    or ebox[5, e2] < ebox[2, e1]):
+                                continue
+                            p1, q1 = edges[0, e1], edges[1, e1]
+                            p2, q2 = edges[0, e2], edges[1, e2]
+                            if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
+                                continue
+                            nb = _add_pair(xin, pairs, nb, x, p1, q1, p2, q2, e1, e2)
+                            cost += TEST_COST
+                            if nb == BATCH:
+                                _segments_batch(xin, out, nb)
+                                nee = _settle_ee(x, c, pairs, out, nb, dmin, nee, ee_end)
+                                nb = 0
+        if nb > 0:
+            _segments_batch(xin, out, nb)
+            nee = _settle_ee(x, c, pairs, out, nb, dmin, nee, ee_end)
+        c.found[part, 0] = npt - pt_first
+        c.found[part, 1] = nee - ee_first
+        c.cost[part] = cost
+
+
+@njit(inline="always", **EXACT)
+def _room(ids: np.ndarray, part: int, parts: int) -> int:
+    """Columns of the pair array ``ids`` that part ``part`` of ``parts`` stores its pairs in."""
+    first, end = share(ids.shape[1], part, parts)
+    return end - first
+
+
+@njit(inline="always", **EXACT)
+def _gather_pairs(ids: np.ndarray, data: np.ndarray, found: np.ndarray, k: int, parts: int) -> tuple[int, int]:
+    """Move the ``parts`` parts' pairs of kind ``k`` (0 point-triangle, 1 edge-edge) from their
+    shares of ``ids`` / ``data`` to one run from column 0, in part order; returns (pairs kept,
+    pairs beyond the arrays' room)."""
+    room = ids.shape[1]
+    kept = 0
+    beyond = 0
+    for part in range(parts):
+        first, end = share(room, part, parts)
+        want = found[part, k]
+        take = min(want, end - first)
+        beyond += want - take
+        if first != kept:
+            # (kept <= first: each part's share starts at or after the pairs before it)
+            for j in range(take):
+                for r in range(ids.shape[0]):
+                    ids[r, kept + j] = ids[r, first + j]
+                for r in range(data.shape[0]):
+                    data[r, kept + j] = data[r, first + j]
+        kept += take
+    return kept, beyond
+
+
+@njit(**EXACT)
+def join(x: np.ndarray, c: Contact, parts: int, rows: int) -> None:
+    """Make ``x`` (3, N) the reference from a rebuild's ``parts`` parts (:func:`search`, the
+    balls' bounds in the first ``rows`` rows of ``dmins``): their pairs in one run, in part order,
+    and each point's ball from the nearest of its bounds. A part whose pairs did not fit its share
+    of the arrays has the whole rebuild searched again as one part (which then stores what fits in
+    the whole arrays, in the order found, and counts the rest as dropped)."""
+    for part in range(parts):
+        if c.found[part, 0] > _room(c.pt, part, parts) or c.found[part, 1] > _room(c.ee, part, parts):
+            search(x, c, 0, 1, 1, 0)
+            parts = 1
+            rows = 1
+            break
+    npt, lost_pt = _gather_pairs(c.pt, c.ptf, c.found, 0, parts)
+    nee, lost_ee = _gather_pairs(c.ee, c.eef, c.found, 1, parts)
+    n = x.shape[1]
+    # (element by element: an array assigned to a slice compiles Numba's error-message string
+    # code, about 3 s of a cold start)
+    for ax in range(3):
+        for p in range(n):
+            c.ref[ax, p] = x[ax, p]
+    floor = FLOOR * c.thickness
+    dmins = c.dmins
+    for p in range(n):
+        d = dmins[0, p]
+        for k in range(1, rows):
+            d = min(d, dmins[k, p])
+        r = GAMMA * max(d - floor, 0.0)
         c.rho2[p] = r * r
     c.meta[VALID] = 1
     c.meta[N_PT] = npt
     c.meta[N_EE] = nee
+    c.meta[DROPPED] += lost_pt + lost_ee
     c.meta[REBUILDS] += 1
     c.meta[CLAMPED] = 0
+
+
+@njit(**EXACT)
+def rebuild(x: np.ndarray, c: Contact) -> None:
+    """Make ``x`` (3, N) the reference: find every point-triangle and edge-edge pair closer than
+    the query radius, store them, and give each point its ball (:func:`search` over every part,
+    then :func:`join`; the thread team runs the parts side by side)."""
+    search(x, c, 0, PARTS, PARTS, 0)
+    join(x, c, PARTS, 1)
 
 
 @njit(**KERNEL)
@@ -938,22 +1033,85 @@ def bound(pos: np.ndarray, c: Contact) -> None:
             c.meta[CLAMPED] = 1
 
 
+@njit(**KERNEL)
+def _stale(pos: np.ndarray, last: np.ndarray, c: Contact) -> bool:
+    """True when the substep that started at ``last`` needs a new reference: there is none, or a
+    point has left its ball (see the module's docstring, step 1)."""
+    return c.meta[VALID] == 0 or _outside(last, c) or _leaving(pos, c)
+
+
+@njit(**KERNEL)
+def _rebuilt(pos: np.ndarray, c: Contact) -> None:
+    # a pinned point that moved further than its ball in this one substep: the bound cannot hold
+    # for its pairs (the pin's motion is prescribed); counted, not hidden
+    for p in range(pos.shape[1]):
+        if not c.movable[p]:
+            dx = pos[0, p] - c.ref[0, p]
+            dy = pos[1, p] - c.ref[1, p]
+            dz = pos[2, p] - c.ref[2, p]
+            if dx * dx + dy * dy + dz * dz > c.rho2[p]:
+                c.meta[UNSAFE] += 1
+                break
+
+
 @njit(**EXACT)
 def contact_respond(pos: np.ndarray, last: np.ndarray, c: Contact) -> None:
     """The first half of the pass, in the self-collision slot of a substep that started at
     ``last``: rebuild the reference if a point has left its ball, then push the pairs apart."""
-    if c.meta[VALID] == 0 or _outside(last, c) or _leaving(pos, c):
+    if _stale(pos, last, c):
         rebuild(last, c)
-        # a pinned point that moved further than its ball in this one substep: the bound cannot
-        # hold for its pairs (the pin's motion is prescribed); counted, not hidden
-        for p in range(pos.shape[1]):
-            if not c.movable[p]:
-                dx = pos[0, p] - c.ref[0, p]
-                dy = pos[1, p] - c.ref[1, p]
-                dz = pos[2, p] - c.ref[2, p]
-                if dx * dx + dy * dy + dz * dz > c.rho2[p]:
-                    c.meta[UNSAFE] += 1
-                    break
+        _rebuilt(pos, c)
+    respond(pos, last, c)
+
+
+# The same first half run by the thread team (solvers/frame.py): each member asks whether the
+# reference is stale and which parts of a rebuild are its own (the same answers from the same
+# arrays, so no member waits for another's); if it is stale each searches its parts; after a
+# barrier the first member joins them and responds. Same bits as contact_respond: the parts'
+# pairs, joined in order, are the pairs of one sweep in its order, and a ball's bound is a minimum.
+# ``flag``: a member's (stale?, first part, end part, team size).
+
+
+@njit(inline="always", **EXACT)
+def _first_part(cost: np.ndarray, member: int, size: int) -> int:
+    """The first part of member ``member`` of ``size``: parts cut where the running sum of
+    ``cost`` reaches member / size of the whole (equal counts of parts before any cost is known)."""
+    total = np.int64(0)
+    for k in range(cost.shape[0]):
+        total += cost[k]
+    if total == 0:
+        return share(cost.shape[0], member, size)[0]
+    run = np.int64(0)
+    for k in range(cost.shape[0]):
+        if run * size >= total * member:
+            return k
+        run += cost[k]
+    return cost.shape[0]
+
+
+@njit(**EXACT)
+def contact_stale(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray, member: int, size: int) -> None:
+    """Member ``member``'s ``flag``: whether the substep that started at ``last`` rebuilds the
+    reference, and its parts of the rebuild."""
+    flag[0] = 1 if _stale(pos, last, c) else 0
+    flag[1] = _first_part(c.cost, member, size)
+    flag[2] = _first_part(c.cost, member + 1, size) if member + 1 < size else PARTS
+    flag[3] = size
+
+
+@njit(**EXACT)
+def contact_search(last: np.ndarray, c: Contact, flag: np.ndarray, member: int) -> None:
+    """Member ``member``'s parts (``flag``) of the rebuild from ``last``."""
+    search(last, c, flag[1], flag[2], PARTS, member)
+
+
+@njit(**EXACT)
+def contact_joined(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray) -> None:
+    """The first member's end of the first half: the rebuild's parts joined (when ``flag`` says
+    it is stale), then the response."""
+    if flag[0] != 0:
+        join(last, c, PARTS, flag[3])
+        _rebuilt(pos, c)
     respond(pos, last, c)
 
 

@@ -54,7 +54,7 @@ from .verlet import verlet_one
 from ..clock import substep_time
 from ..passes.pins import offset_at, pin_chunk
 from ..passes.colliders.mesh import MeshGroup, collide_meshes_chunk, collide_types
-from ..passes.contact import contact_bound, contact_respond
+from ..passes.contact import contact_bound, contact_joined, contact_search, contact_stale
 from ..passes.selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from ..state import Plan
 from ..team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
@@ -65,10 +65,11 @@ PASS_INTEGRATE, PASS_SELF, PASS_COLLIDERS, PASS_PROVOT, PASS_CONTACT = 1, 2, 4, 
 PASS_ALL = 31
 
 #: The passes the member calls by address, in ``ClothState.calls``: those every plan runs, then
-#: the contact mode's two (0 without it). Each is compiled once for every plan that has it, so
-#: that a plan compiles only its own loop.
-CALL_SPRINGS, CALL_GATHER, CALL_VERLET, CALL_BANDS, CALL_CUTS, CALL_RESPOND, CALL_BOUND = range(7)
-CALLS = 7
+#: the contact mode's four (0 without it: the response with the rebuild's join, the bound, whether
+#: to rebuild, a member's parts of the rebuild). Each is compiled once for every plan that has it,
+#: so that a plan compiles only its own loop.
+CALL_SPRINGS, CALL_GATHER, CALL_VERLET, CALL_BANDS, CALL_CUTS, CALL_RESPOND, CALL_BOUND, CALL_STALE, CALL_SEARCH = range(9)
+CALLS = 9
 
 
 @njit(**KERNEL)
@@ -118,6 +119,9 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         skipped = np.zeros(1, np.int64)
     if pins is not None:
         offset = np.empty(3)
+    if contact is not None:
+        # whether this substep rebuilds the contact reference, and the member's parts of it
+        stale = np.zeros(4, np.int64)
     gen = np.int64(0)
     for substep in range(steps):
         if integrate:
@@ -201,9 +205,20 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     return
         if contact is not None:
             if self_on:
-                # the contact response, where the hash's self-collision would be
+                # the contact response, where the hash's self-collision would be; a rebuild of its
+                # reference is searched by the whole team, each member its parts. Every member
+                # decides for itself, from the same arrays, before any moves a point.
+                call_native(st.calls[CALL_STALE], (pos, last, contact, stale, np.int64(member), np.int64(size)))
+                gen = barrier(sync, size, gen)
+                if gen < 0:
+                    return
+                if stale[0] != 0:
+                    call_native(st.calls[CALL_SEARCH], (last, contact, stale, np.int64(member)))
+                    gen = barrier(sync, size, gen)
+                    if gen < 0:
+                        return
                 if member == 0:
-                    call_native(st.calls[CALL_RESPOND], (pos, last, contact))
+                    call_native(st.calls[CALL_RESPOND], (pos, last, contact, stale))
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
@@ -303,7 +318,10 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
     contact = None
     if groups.contact != types.none:
         pos, last = st.types[st.fields.index("pos")], st.types[st.fields.index("last")]
-        contact = ((contact_respond, (pos, last, groups.contact)), (contact_bound, (pos, groups.contact)))
+        flag = types.Array(types.int64, 1, "C")
+        contact = ((contact_joined, (pos, last, groups.contact, flag)), (contact_bound, (pos, groups.contact)),
+                   (contact_stale, (pos, last, groups.contact, flag, i64, i64)),
+                   (contact_search, (last, groups.contact, flag, i64)))
 
     # A cold start's two processes: the second compiles the member (5-9 s cold) and the mesh
     # pass (8-9 s) or else the set's two kernels (3 s), this one the rest (the kinds' passes
@@ -324,7 +342,7 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
     with compiling_alone(_member, member):
         compile_elsewhere(_member, member, meanwhile, beside)
         # (compiled here, on one core or when the second process failed)
-        calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0, 0)))
+        calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0,) * 4))
         return Addresses(native_address(_member, member),
                          0 if repel is None else native_address(repel_slots, repel),
                          0 if collide is None else native_address(collide_meshes_chunk, collide),
