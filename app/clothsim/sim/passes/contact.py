@@ -479,6 +479,9 @@ def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, ne
 BATCH = 256
 #: What a pair's test costs a rebuild, in entries of a cell read (for sharing the parts out).
 TEST_COST = 4
+# (the counts search and join are called with, typed int64: a literal argument would have them
+# compiled once more for its literal type)
+_ZERO, _ONE, _PARTS = np.int64(0), np.int64(1), np.int64(PARTS)
 
 
 @njit(inline="always", **EXACT)
@@ -821,7 +824,7 @@ def join(x: np.ndarray, c: Contact, parts: int, rows: int) -> None:
     the whole arrays, in the order found, and counts the rest as dropped)."""
     for part in range(parts):
         if c.found[part, 0] > _room(c.pt, part, parts) or c.found[part, 1] > _room(c.ee, part, parts):
-            search(x, c, 0, 1, 1, 0)
+            search(x, c, _ZERO, _ONE, _ONE, _ZERO)
             parts = 1
             rows = 1
             break
@@ -854,8 +857,8 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     """Make ``x`` (3, N) the reference: find every point-triangle and edge-edge pair closer than
     the query radius, store them, and give each point its ball (:func:`search` over every part,
     then :func:`join`; the thread team runs the parts side by side)."""
-    search(x, c, 0, PARTS, PARTS, 0)
-    join(x, c, PARTS, 1)
+    search(x, c, _ZERO, _PARTS, _PARTS, _ZERO)
+    join(x, c, _PARTS, _ONE)
 
 
 @njit(**KERNEL)
@@ -1102,7 +1105,7 @@ def contact_stale(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarra
 @njit(**EXACT)
 def contact_search(last: np.ndarray, c: Contact, flag: np.ndarray, member: int) -> None:
     """Member ``member``'s parts (``flag``) of the rebuild from ``last``."""
-    search(last, c, flag[1], flag[2], PARTS, member)
+    search(last, c, flag[1], flag[2], _PARTS, member)
 
 
 @njit(**EXACT)
@@ -1110,7 +1113,7 @@ def contact_joined(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarr
     """The first member's end of the first half: the rebuild's parts joined (when ``flag`` says
     it is stale), then the response."""
     if flag[0] != 0:
-        join(last, c, PARTS, flag[3])
+        join(last, c, _PARTS, flag[3])
         _rebuilt(pos, c)
     respond(pos, last, c)
 
