@@ -30,8 +30,11 @@ distance d each move less than d/2. In each substep:
 The broad phase is a uniform grid of hashed cells, built at a rebuild only (:func:`rebuild` has
 the rule): the triangles' boxes, widened by the query radius, in every cell they overlap, read by
 each point in its own cell; each edge's box, widened by half of it, once in the cell of its lower
-corner, read by the other edges from the cells where an overlapping box can start. Between
-rebuilds a substep costs three passes over the points and one over the stored pairs.
+corner, read by the other edges from the cells where an overlapping box can start. A rebuild is
+cut into ``PARTS`` parts, ranges of the points and of the edges (:func:`search`), which the thread
+team's members search side by side; the first member joins them in order (:func:`join`), so the
+pairs and balls are one sweep's whoever searched what. Between rebuilds a substep costs three
+passes over the points and one over the stored pairs.
 """
 
 from __future__ import annotations
