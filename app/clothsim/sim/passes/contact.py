@@ -461,9 +461,9 @@ def _keep_ee(c: Contact, e1: int, e2: int, u: float, v: float, nx: float, ny: fl
 
 @njit(inline="always", **EXACT)
 def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, nee: int, end: int) -> int:
-    """Test one edge-edge pair; returns the pairs kept (see :func:`_keep_pt`). (The rebuild tests its pairs in batches,
-    :func:`_segments_batch`, with the same bits; this one takes the pairs with an edge of no
-    length.)"""
+    """Test one edge-edge pair; returns the pairs kept (see :func:`_keep_pt`). (The rebuild tests
+    its pairs in batches, :func:`_segments_batch`, with the same bits; this one takes the pairs
+    with an edge of no length.)"""
     edges = c.edges
     p1, q1 = edges[0, e1], edges[1, e1]
     p2, q2 = edges[0, e2], edges[1, e2]

@@ -68,7 +68,8 @@ PASS_ALL = 31
 #: the contact mode's four (0 without it: the response with the rebuild's join, the bound, whether
 #: to rebuild, a member's parts of the rebuild). Each is compiled once for every plan that has it,
 #: so that a plan compiles only its own loop.
-CALL_SPRINGS, CALL_GATHER, CALL_VERLET, CALL_BANDS, CALL_CUTS, CALL_RESPOND, CALL_BOUND, CALL_STALE, CALL_SEARCH = range(9)
+(CALL_SPRINGS, CALL_GATHER, CALL_VERLET, CALL_BANDS, CALL_CUTS, CALL_RESPOND, CALL_BOUND, CALL_STALE,
+ CALL_SEARCH) = range(9)
 CALLS = 9
 
 
