@@ -232,31 +232,6 @@ def closest_on_segments(p1x: float, p1y: float, p1z: float, q1x: float, q1y: flo
 # broad phase
 
 
-@njit(**KERNEL)
-def _boxes(x: np.ndarray, tris: np.ndarray, edges: np.ndarray, pad: float) -> np.ndarray:
-    """(6, N + E + T) boxes (lo, hi) of the points, edges and triangles, widened by ``pad``."""
-    n = x.shape[1]
-    ne = edges.shape[1]
-    nt = tris.shape[1]
-    box = np.empty((6, n + ne + nt))
-    for ax in range(3):
-        for p in range(n):
-            box[ax, p] = x[ax, p] - pad
-            box[3 + ax, p] = x[ax, p] + pad
-        for e in range(ne):
-            a = x[ax, edges[0, e]]
-            b = x[ax, edges[1, e]]
-            box[ax, n + e] = min(a, b) - pad
-            box[3 + ax, n + e] = max(a, b) + pad
-        for t in range(nt):
-            a = x[ax, tris[0, t]]
-            b = x[ax, tris[1, t]]
-            c = x[ax, tris[2, t]]
-            box[ax, n + ne + t] = min(a, min(b, c)) - pad
-            box[3 + ax, n + ne + t] = max(a, max(b, c)) + pad
-    return box
-
-
 @njit(inline="always", **KERNEL)
 def _cell(v: float, inv: float) -> np.int64:
     return np.int64(np.floor(v * inv))
