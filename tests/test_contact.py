@@ -293,8 +293,10 @@ def _joined(x: np.ndarray, c, members: int) -> tuple:  # noqa: ANN001
     from clothsim.sim.passes.contact import DROPPED, N_EE, N_PT, contact_search, contact_stale, join
 
     flags = [np.zeros(4, np.int64) for _ in range(members)]
+    c.meta[0] = 0  # no reference (as at a frame's start): stale for every member
     for m, flag in enumerate(flags):  # every member decides before any searches (as in the team)
         contact_stale(x, x, c, flag, m, members)
+    assert all(flag[0] == 1 and flag[3] == members for flag in flags)
     assert flags[0][1] == 0 and flags[-1][2] == len(c.cost)
     assert all(a[2] == b[1] for a, b in zip(flags, flags[1:]))  # each part searched once
     for m, flag in enumerate(flags):

@@ -308,8 +308,8 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
     skeys = np.empty(total, dtype=np.int64)
     sids = np.empty(total, dtype=np.int64)
     # (placed from the last entry back, each slot filled from its end: a slot's entries keep
-    # their order, and start ends up at each slot's first; 5x faster on a flat 50 x 50 cloth
-    # than a copy of the starts as cursors, for a reason not pinned down)
+    # their order, and start ends up at each slot's first, with no copy of the starts as cursors,
+    # which cost several times the placing itself: docs/self-collision.md, Cost)
     for j in range(total - 1, -1, -1):
         s = _slot_of(keys[j], shift)
         start[s] -= 1
@@ -1035,22 +1035,13 @@ def _rebuilt(pos: np.ndarray, c: Contact) -> None:
                 break
 
 
-@njit(**EXACT)
-def contact_respond(pos: np.ndarray, last: np.ndarray, c: Contact) -> None:
-    """The first half of the pass, in the self-collision slot of a substep that started at
-    ``last``: rebuild the reference if a point has left its ball, then push the pairs apart."""
-    if _stale(pos, last, c):
-        rebuild(last, c)
-        _rebuilt(pos, c)
-    respond(pos, last, c)
-
-
-# The same first half run by the thread team (solvers/frame.py): each member asks whether the
-# reference is stale and which parts of a rebuild are its own (the same answers from the same
-# arrays, so no member waits for another's); if it is stale each searches its parts; after a
-# barrier the first member joins them and responds. Same bits as contact_respond: the parts'
-# pairs, joined in order, are the pairs of one sweep in its order, and a ball's bound is a minimum.
-# ``flag``: a member's (stale?, first part, end part, team size).
+# The first half of the pass as the thread team runs it (solvers/frame.py): each member asks
+# whether the reference is stale and, if so, which parts of the rebuild are its own (the same
+# answers from the same arrays, so no member waits for another's, and the question costs the team
+# no time: the others would wait for the first member meanwhile); if it is stale each searches
+# its parts; after a barrier the first member joins them and responds. The parts' pairs, joined
+# in order, are the pairs of one sweep in its order, and a ball's bound is a minimum, so the bits
+# do not depend on the team's size. ``flag``: a member's (stale?, first part, end part, team size).
 
 
 @njit(inline="always", **EXACT)
@@ -1073,11 +1064,12 @@ def _first_part(cost: np.ndarray, member: int, size: int) -> int:
 @njit(**EXACT)
 def contact_stale(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray, member: int, size: int) -> None:
     """Member ``member``'s ``flag``: whether the substep that started at ``last`` rebuilds the
-    reference, and its parts of the rebuild."""
+    reference, and if so its parts of the rebuild."""
     flag[0] = 1 if _stale(pos, last, c) else 0
-    flag[1] = _first_part(c.cost, member, size)
-    flag[2] = _first_part(c.cost, member + 1, size) if member + 1 < size else PARTS
-    flag[3] = size
+    if flag[0] != 0:
+        flag[1] = _first_part(c.cost, member, size)
+        flag[2] = _first_part(c.cost, member + 1, size) if member + 1 < size else PARTS
+        flag[3] = size
 
 
 @njit(**EXACT)
@@ -1094,6 +1086,18 @@ def contact_joined(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarr
         join(last, c, _PARTS, flag[3])
         _rebuilt(pos, c)
     respond(pos, last, c)
+
+
+@njit(**EXACT)
+def contact_respond(pos: np.ndarray, last: np.ndarray, c: Contact) -> None:
+    """The first half of the pass, in the self-collision slot of a substep that started at
+    ``last``: rebuild the reference if a point has left its ball, then push the pairs apart (the
+    team's three steps run by a team of one: the other integrators' substep)."""
+    flag = np.empty(4, dtype=np.int64)
+    contact_stale(pos, last, c, flag, _ZERO, _ONE)
+    if flag[0] != 0:
+        contact_search(last, c, flag, _ZERO)
+    contact_joined(pos, last, c, flag)
 
 
 @njit(**EXACT)
