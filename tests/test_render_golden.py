@@ -126,10 +126,13 @@ WIREFRAME_OFFSET_REASON = ("the 48x48 wireframe at 256x256 puts a line within a 
 
 @pytest.mark.parametrize("look", [pytest.param(look, marks=pytest.mark.skip(reason=WIREFRAME_OFFSET_REASON))
                                   if look == "wireframe" else look for look in SHADERS])
-def test_a_sub_pixel_offset_passes(look, renderer, state, monkeypatch):
+def test_a_sub_pixel_offset_passes(look, renderer, state, images, monkeypatch):
     """The whole image moved by 1/64 pixel (4 steps of the 8-bit sub-pixel grid rasterisers snap
     vertices to) stands for a driver that rasterises edges and samples textures a little
-    differently: it must match."""
+    differently: it must match. Compared with this driver's own unmoved image, not the golden:
+    on another driver the golden already differs by that driver's noise (test_golden bounds it),
+    and the offset would be counted on top of it (NVIDIA's texture look: p99.5 9 against the
+    golden, over the tolerance, while its unmoved image matches the golden)."""
     from clothsim.render import camera
 
     offset = np.eye(4)
@@ -137,9 +140,9 @@ def test_a_sub_pixel_offset_passes(look, renderer, state, monkeypatch):
     plain = camera.Camera.view_projection
     monkeypatch.setattr(camera.Camera, "view_projection", lambda self, aspect: offset @ plain(self, aspect))
     moved = renderer.render(state, look)
-    golden = _golden(look)
-    assert not np.array_equal(moved, golden)  # the offset does move pixels
-    assert images_match(moved, golden), f"{look}: {image_difference(moved, golden)}"
+    plain_image = images[look]
+    assert not np.array_equal(moved, plain_image)  # the offset does move pixels
+    assert images_match(moved, plain_image), f"{look}: {image_difference(moved, plain_image)}"
 
 
 def test_looks_differ_from_each_other(images):
