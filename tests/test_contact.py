@@ -290,9 +290,10 @@ def test_the_batched_tests_give_the_one_at_a_time_tests_bits() -> None:
 def _joined(x: np.ndarray, c, members: int) -> tuple:  # noqa: ANN001
     """A rebuild searched by ``members`` members, each its parts, then joined: what it stored, and
     whether a part found more pairs than its share of the arrays holds."""
-    from clothsim.sim.passes.contact import DROPPED, N_EE, N_PT, contact_search, contact_stale, join
+    from clothsim.sim.passes.contact import CUT, DROPPED, FLAG, N_EE, N_PT, SIZE, contact_search, contact_stale, \
+        fall_back, join, overflowed
 
-    flags = [np.zeros(4, np.int64) for _ in range(members)]
+    flags = [np.zeros(FLAG, np.int64) for _ in range(members)]
     c.meta[0] = 0  # no reference (as at a frame's start): stale for every member
     for m, flag in enumerate(flags):  # every member decides before any searches (as in the team)
         contact_stale(x, x, c, flag, m, members)
@@ -304,10 +305,41 @@ def _joined(x: np.ndarray, c, members: int) -> tuple:  # noqa: ANN001
     parts = len(c.cost)
     over = any(c.found[k, 0] > (k + 1) * c.pt.shape[1] // parts - k * c.pt.shape[1] // parts
                or c.found[k, 1] > (k + 1) * c.ee.shape[1] // parts - k * c.ee.shape[1] // parts for k in range(parts))
-    join(x, c, parts, members)
+    assert overflowed(c, parts) == over
+    flag = flags[0]  # the first member's, as in the team
+    if over:
+        fall_back(flag)
+        contact_search(x, c, flag, 0)
+    join(x, c, flag[CUT], flag[SIZE])
     npt, nee = int(c.meta[N_PT]), int(c.meta[N_EE])
     return (c.pt[:, :npt].copy(), c.ptf[:, :npt].copy(), c.ee[:, :nee].copy(), c.eef[:, :nee].copy(),
             c.rho2.copy(), int(c.meta[DROPPED])), over
+
+
+def test_a_part_over_its_share_has_the_first_member_search_the_rebuild_again_in_the_frame(monkeypatch) -> None:
+    # the frame kernel's own fall-back: pair arrays too short for a part's pairs in its share (but
+    # long enough for all of a rebuild's pairs) have the first member search the whole rebuild again
+    # as one part, and the cloth moves as it does with arrays of the usual length, bit for bit
+    from clothsim.sim import simulation as simulation_module
+    from clothsim.sim.passes.contact import DROPPED, PARTS, overflowed
+
+    usual = simulation_module.contact_group
+
+    def short(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        c = usual(*args, **kwargs)
+        return c._replace(pt=np.zeros((2, 200), np.int64), ptf=np.zeros((6, 200)), ee=np.zeros((2, 200), np.int64),
+                          eef=np.zeros((5, 200)))
+
+    want = Simulation(self_collision_scene(20))
+    monkeypatch.setattr(simulation_module, "contact_group", short)
+    got = Simulation(self_collision_scene(20))
+    fell_back = 0
+    for _ in range(60):
+        want.step(1)
+        got.step(1)
+        fell_back += overflowed(got._kernel_args.contact, PARTS)  # the last rebuild was searched again
+        assert np.array_equal(got.positions, want.positions)
+    assert fell_back > 0 and got._kernel_args.contact.meta[DROPPED] == 0
 
 
 @pytest.mark.parametrize("room", ["shares", "all", "half"])

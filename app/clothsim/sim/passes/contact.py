@@ -83,6 +83,12 @@ ROOMY = 0.25
 #: (the previous rebuild's costs), and the bits do not depend on who searched which.
 PARTS = 32
 
+#: A member's flag, an int64 row of FLAG: whether the substep rebuilds the reference, the member's
+#: first part and end part, the team's size (the rows of ``dmins`` written), the parts the
+#: rebuild is cut into.
+STALE, FIRST, END, SIZE, CUT = range(5)
+FLAG = 5
+
 # meta fields (MOVING: 1 in a frame whose pins move, set by the simulation; CLAMPED: 1 when the
 # bound has moved a point since the last rebuild)
 VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE, MOVING, CLAMPED = 0, 1, 2, 3, 4, 5, 6, 7
@@ -793,19 +799,28 @@ def _gather_pairs(ids: np.ndarray, data: np.ndarray, found: np.ndarray, k: int, 
     return kept, beyond
 
 
+@njit(inline="always", **EXACT)
+def overflowed(c: Contact, parts: int) -> bool:
+    """Whether a part of a rebuild cut into ``parts`` found more pairs than its share of the pair
+    arrays holds. The rebuild is then searched again as one part (see :func:`fall_back`), which
+    stores what fits in the whole arrays, in the order found, and counts the rest as dropped."""
+    for part in range(parts):
+        if c.found[part, 0] > _room(c.pt, part, parts) or c.found[part, 1] > _room(c.ee, part, parts):
+            return True
+    return False
+
+
+@njit(inline="always", **EXACT)
+def fall_back(flag: np.ndarray) -> None:
+    """``flag`` (see :data:`FLAG`) made the whole rebuild as one part, searched by one member."""
+    flag[FIRST], flag[END], flag[SIZE], flag[CUT] = 0, 1, 1, 1
+
+
 @njit(**EXACT)
 def join(x: np.ndarray, c: Contact, parts: int, rows: int) -> None:
     """Make ``x`` (3, N) the reference from a rebuild's ``parts`` parts (:func:`search`, the
-    balls' bounds in the first ``rows`` rows of ``dmins``): their pairs in one run, in part order,
-    and each point's ball from the nearest of its bounds. A part whose pairs did not fit its share
-    of the arrays has the whole rebuild searched again as one part (which then stores what fits in
-    the whole arrays, in the order found, and counts the rest as dropped)."""
-    for part in range(parts):
-        if c.found[part, 0] > _room(c.pt, part, parts) or c.found[part, 1] > _room(c.ee, part, parts):
-            search(x, c, _ZERO, _ONE, _ONE, _ZERO)
-            parts = 1
-            rows = 1
-            break
+    balls' bounds in the first ``rows`` rows of ``dmins``), none of them :func:`overflowed`: their
+    pairs in one run, in part order, and each point's ball from the nearest of its bounds."""
     npt, lost_pt = _gather_pairs(c.pt, c.ptf, c.found, 0, parts)
     nee, lost_ee = _gather_pairs(c.ee, c.eef, c.found, 1, parts)
     n = x.shape[1]
@@ -836,7 +851,11 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     the query radius, store them, and give each point its ball (:func:`search` over every part,
     then :func:`join`; the thread team runs the parts side by side)."""
     search(x, c, _ZERO, _PARTS, _PARTS, _ZERO)
-    join(x, c, _PARTS, _ONE)
+    if overflowed(c, _PARTS):
+        search(x, c, _ZERO, _ONE, _ONE, _ZERO)
+        join(x, c, _ONE, _ONE)
+    else:
+        join(x, c, _PARTS, _ONE)
 
 
 @njit(**KERNEL)
@@ -1041,7 +1060,10 @@ def _rebuilt(pos: np.ndarray, c: Contact) -> None:
 # no time: the others would wait for the first member meanwhile); if it is stale each searches
 # its parts; after a barrier the first member joins them and responds. The parts' pairs, joined
 # in order, are the pairs of one sweep in its order, and a ball's bound is a minimum, so the bits
-# do not depend on the team's size. ``flag``: a member's (stale?, first part, end part, team size).
+# do not depend on the team's size. Before joining, the first member has a rebuild whose part
+# overflowed its share searched again as one part (by the member's search called once more, not
+# from inside the join, which would carry a second compiled copy of the search).
+
 
 
 @njit(inline="always", **EXACT)
@@ -1065,25 +1087,26 @@ def _first_part(cost: np.ndarray, member: int, size: int) -> int:
 def contact_stale(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray, member: int, size: int) -> None:
     """Member ``member``'s ``flag``: whether the substep that started at ``last`` rebuilds the
     reference, and if so its parts of the rebuild."""
-    flag[0] = 1 if _stale(pos, last, c) else 0
-    if flag[0] != 0:
-        flag[1] = _first_part(c.cost, member, size)
-        flag[2] = _first_part(c.cost, member + 1, size) if member + 1 < size else PARTS
-        flag[3] = size
+    flag[STALE] = 1 if _stale(pos, last, c) else 0
+    if flag[STALE] != 0:
+        flag[FIRST] = _first_part(c.cost, member, size)
+        flag[END] = _first_part(c.cost, member + 1, size) if member + 1 < size else PARTS
+        flag[SIZE] = size
+        flag[CUT] = PARTS
 
 
 @njit(**EXACT)
 def contact_search(last: np.ndarray, c: Contact, flag: np.ndarray, member: int) -> None:
     """Member ``member``'s parts (``flag``) of the rebuild from ``last``."""
-    search(last, c, flag[1], flag[2], _PARTS, member)
+    search(last, c, flag[FIRST], flag[END], flag[CUT], member)
 
 
 @njit(**EXACT)
 def contact_joined(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray) -> None:
     """The first member's end of the first half: the rebuild's parts joined (when ``flag`` says
     it is stale), then the response."""
-    if flag[0] != 0:
-        join(last, c, _PARTS, flag[3])
+    if flag[STALE] != 0:
+        join(last, c, flag[CUT], flag[SIZE])
         _rebuilt(pos, c)
     respond(pos, last, c)
 
@@ -1093,10 +1116,13 @@ def contact_respond(pos: np.ndarray, last: np.ndarray, c: Contact) -> None:
     """The first half of the pass, in the self-collision slot of a substep that started at
     ``last``: rebuild the reference if a point has left its ball, then push the pairs apart (the
     team's three steps run by a team of one: the other integrators' substep)."""
-    flag = np.empty(4, dtype=np.int64)
+    flag = np.empty(FLAG, dtype=np.int64)
     contact_stale(pos, last, c, flag, _ZERO, _ONE)
-    if flag[0] != 0:
+    if flag[STALE] != 0:
         contact_search(last, c, flag, _ZERO)
+        if overflowed(c, flag[CUT]):
+            fall_back(flag)
+            contact_search(last, c, flag, _ZERO)
     contact_joined(pos, last, c, flag)
 
 

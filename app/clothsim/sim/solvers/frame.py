@@ -54,7 +54,8 @@ from .verlet import verlet_one
 from ..clock import substep_time
 from ..passes.pins import offset_at, pin_chunk
 from ..passes.colliders.mesh import MeshGroup, collide_meshes_chunk, collide_types
-from ..passes.contact import contact_bound, contact_joined, contact_search, contact_stale
+from ..passes.contact import CUT, FLAG, STALE, contact_bound, contact_joined, contact_search, contact_stale, \
+    fall_back, overflowed
 from ..passes.selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from ..state import Plan
 from ..team import ABORT, FAILED, atomic_cas, barrier, roll_call, share
@@ -122,7 +123,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         offset = np.empty(3)
     if contact is not None:
         # whether this substep rebuilds the contact reference, and the member's parts of it
-        stale = np.zeros(4, np.int64)
+        stale = np.zeros(FLAG, np.int64)
     gen = np.int64(0)
     for substep in range(steps):
         if integrate:
@@ -213,12 +214,15 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 gen = barrier(sync, size, gen)
                 if gen < 0:
                     return
-                if stale[0] != 0:
+                if stale[STALE] != 0:
                     call_native(st.calls[CALL_SEARCH], (last, contact, stale, np.int64(member)))
                     gen = barrier(sync, size, gen)
                     if gen < 0:
                         return
                 if member == 0:
+                    if stale[STALE] != 0 and overflowed(contact, stale[CUT]):
+                        fall_back(stale)
+                        call_native(st.calls[CALL_SEARCH], (last, contact, stale, np.int64(0)))
                     call_native(st.calls[CALL_RESPOND], (pos, last, contact, stale))
                 gen = barrier(sync, size, gen)
                 if gen < 0:
