@@ -117,10 +117,17 @@ def test_size_beyond_the_driver_limit_is_refused_before_allocating(contexts, mon
     _all_released(made[0])
 
 
-def test_size_beyond_the_memory_is_refused_with_both_amounts(contexts, monkeypatch):
-    made, _ = contexts
-    need = framebuffer_bytes(4096, 4096, 4)
-    assert need == 4096 * 4096 * (4 * 8 + 4 + 3)  # 4 samples of colour + depth, resolve, read-back
+@pytest.mark.parametrize("driver", ["this one", "a GPU's"])
+def test_size_beyond_the_memory_is_refused_with_both_amounts(contexts, gl_info, monkeypatch, driver):
+    made, limits = contexts
+    assert framebuffer_bytes(4096, 4096, 4) == 4096 * 4096 * (4 * 8 + 4 + 3)  # 4 samples of colour + depth,
+    # resolve, read-back; a GPU keeps its framebuffers in its own memory: only the read-back counts
+    assert framebuffer_bytes(4096, 4096, 4, software=False) == 4096 * 4096 * 3
+    if driver != "this one":
+        limits["GL_RENDERER"] = "NVIDIA H100 80GB HBM3/PCIe/SSE2"  # as that driver names itself
+    renderer_name = str(limits.get("GL_RENDERER", gl_info.get("GL_RENDERER", "")))
+    software = renderer_module._is_software(renderer_name)
+    need = framebuffer_bytes(4096, 4096, 4, software=software)
     monkeypatch.setattr(renderer_module, "available_memory", lambda: need - 1)
     monkeypatch.setattr(renderer_module.Renderer, "_framebuffers",
                         lambda self: pytest.fail("allocated a framebuffer past the memory"))
@@ -128,7 +135,9 @@ def test_size_beyond_the_memory_is_refused_with_both_amounts(contexts, monkeypat
         Renderer(4096, 4096, samples=4)
     message = str(info.value)
     assert "\n" not in message
-    if "llvmpipe" in made[0].info.get("GL_RENDERER", ""):
+    if driver != "this one":
+        assert "needs about 48 MiB" in message and "48 MiB available" in message
+    elif "llvmpipe" in made[0].info.get("GL_RENDERER", ""):
         assert "needs about 0.6 GiB" in message and "0.6 GiB available" in message
     _all_released(made[0])
 

@@ -69,7 +69,8 @@ def _is_software(gl_renderer: str) -> bool:
 
 
 def _gib(n: int) -> str:
-    return f"{n / 2**30:.1f} GiB"
+    # (in MiB below a tenth of a GiB: a GPU's read-back alone would read "0.0 GiB")
+    return f"{n / 2**30:.1f} GiB" if n >= 2**30 / 10 else f"{n / 2**20:.0f} MiB"
 
 
 class ClothState(Protocol):
