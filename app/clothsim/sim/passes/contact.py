@@ -1065,7 +1065,6 @@ def _rebuilt(pos: np.ndarray, c: Contact) -> None:
 # from inside the join, which would carry a second compiled copy of the search).
 
 
-
 @njit(inline="always", **EXACT)
 def _first_part(cost: np.ndarray, member: int, size: int) -> int:
     """The first part of member ``member`` of ``size``: parts cut where the running sum of
