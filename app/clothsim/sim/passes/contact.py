@@ -463,9 +463,9 @@ def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, ne
 BATCH = 256
 #: What a pair's test costs a rebuild, in entries of a cell read (for sharing the parts out).
 TEST_COST = 4
-# (the counts search and join are called with, typed int64: a literal argument would have them
-# compiled once more for its literal type)
-_ZERO, _ONE, _PARTS = np.int64(0), np.int64(1), np.int64(PARTS)
+# (the member and team size the serial path calls with, typed int64: a literal argument would have
+# the callees compiled once more for its literal type)
+_ZERO, _ONE = np.int64(0), np.int64(1)
 
 
 @njit(inline="always", **EXACT)
@@ -850,12 +850,10 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     """Make ``x`` (3, N) the reference: find every point-triangle and edge-edge pair closer than
     the query radius, store them, and give each point its ball (:func:`search` over every part,
     then :func:`join`; the thread team runs the parts side by side)."""
-    search(x, c, _ZERO, _PARTS, _PARTS, _ZERO)
-    if overflowed(c, _PARTS):
-        search(x, c, _ZERO, _ONE, _ONE, _ZERO)
-        join(x, c, _ONE, _ONE)
-    else:
-        join(x, c, _PARTS, _ONE)
+    flag = np.empty(FLAG, dtype=np.int64)
+    flag[STALE], flag[FIRST], flag[END], flag[SIZE], flag[CUT] = 1, 0, PARTS, 1, PARTS
+    _search_alone(x, c, flag)
+    join(x, c, flag[CUT], flag[SIZE])
 
 
 @njit(**KERNEL)
@@ -1100,6 +1098,17 @@ def contact_search(last: np.ndarray, c: Contact, flag: np.ndarray, member: int) 
     search(last, c, flag[FIRST], flag[END], flag[CUT], member)
 
 
+@njit(inline="always", **EXACT)
+def _search_alone(x: np.ndarray, c: Contact, flag: np.ndarray) -> None:
+    """The parts of a rebuild that ``flag`` gives, searched by one member alone, and the whole
+    rebuild again as one part if a part :func:`overflowed` (the team's first member does the same
+    after the others' searches: solvers/frame.py)."""
+    contact_search(x, c, flag, _ZERO)
+    if overflowed(c, flag[CUT]):
+        fall_back(flag)
+        contact_search(x, c, flag, _ZERO)
+
+
 @njit(**EXACT)
 def contact_joined(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray) -> None:
     """The first member's end of the first half: the rebuild's parts joined (when ``flag`` says
@@ -1118,10 +1127,7 @@ def contact_respond(pos: np.ndarray, last: np.ndarray, c: Contact) -> None:
     flag = np.empty(FLAG, dtype=np.int64)
     contact_stale(pos, last, c, flag, _ZERO, _ONE)
     if flag[STALE] != 0:
-        contact_search(last, c, flag, _ZERO)
-        if overflowed(c, flag[CUT]):
-            fall_back(flag)
-            contact_search(last, c, flag, _ZERO)
+        _search_alone(last, c, flag)
     contact_joined(pos, last, c, flag)
 
 
