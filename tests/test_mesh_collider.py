@@ -1,5 +1,6 @@
-"""Triangle-mesh colliders: the OBJ reader and its errors, the shape checks, the grid against brute
-force, and cloth kept outside closed meshes and on its side of open ones."""
+"""Triangle-mesh colliders: the OBJ reader and its errors, the shape checks, the grid and the points'
+lists against brute force, the lists' separating planes, and cloth kept outside closed meshes and on
+its side of open ones."""
 
 from __future__ import annotations
 
@@ -7,13 +8,14 @@ import json
 
 import numpy as np
 import pytest
+from numba import njit
 
 from clothsim import Simulation, load_scene
 from clothsim.errors import SceneError
-from clothsim.meshcollider import rotation_matrix
+from clothsim.meshcollider import NEAR_PLANES, rotation_matrix
 from clothsim.objfile import ObjError, parse_obj
 from clothsim.objshapes import TORUS, box_obj, torus_obj
-from clothsim.sim.passes.colliders.mesh import closest_on_triangle, mesh_targets
+from clothsim.sim.passes.colliders.mesh import closest_on_triangle, mesh_targets, segment_hits
 from clothsim.sim.passes.colliders.meshgrid import INFO_NEAR, INFO_NEAR_OK, mesh_group
 
 from conftest import SCENES, error_line
@@ -132,13 +134,36 @@ def test_bundled_torus_is_what_the_generator_writes():
 
 
 # -- the grid against brute force -----------------------------------------------------------------
+def _without_planes(group):
+    """The group with room for no separating plane: every listed point is decided by the tests."""
+    return group._replace(near_pl=np.zeros(group.near_pl.shape[:2] + (0, 4)))
+
+
+@njit(cache=False)
+def _distance_and_crossing(last, out, verts, tris, shift):
+    """Each point's distance from the mesh at ``out`` and whether last -> out crosses a triangle."""
+    n = out.shape[1]
+    dist = np.full(n, np.inf)
+    crossed = np.zeros(n, np.bool_)
+    for i in range(n):
+        qx, qy, qz = out[0, i] - shift[0], out[1, i] - shift[1], out[2, i] - shift[2]
+        lx, ly, lz = last[0, i] - shift[0], last[1, i] - shift[1], last[2, i] - shift[2]
+        for t in range(tris.shape[0]):
+            a, b, c = verts[tris[t, 0]], verts[tris[t, 1]], verts[tris[t, 2]]
+            px, py, pz, _ = closest_on_triangle(qx, qy, qz, a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2])
+            dist[i] = min(dist[i], np.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2))
+            if segment_hits(lx, ly, lz, qx, qy, qz, a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]) >= 0.0:
+                crossed[i] = True
+    return dist, crossed
+
+
 @pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both
 def test_grid_gives_the_same_contacts_as_brute_force(tmp_path):
     rng = np.random.default_rng(7)
     for obj, mesh in ((torus_obj(*TORUS), {"translate": [0.5, 0.3, 0.5], "rotation": [20, 35, -10]}),
                       (box_obj(0.2, 0.1, 0.3, drop_top=True), {"translate": [0.5, 0.5, 0.5], "scale": 1.5})):
         scene = load_scene(_scene(tmp_path, obj, {"path": "shape.obj", "friction": 0.25, **mesh}))
-        group = mesh_group(scene)
+        group = _without_planes(mesh_group(scene))
         lo = group.verts.min(axis=0) + group.pose[0, :3] - 0.05
         hi = group.verts.max(axis=0) + group.pose[0, :3] + 0.05
         n = 20000
@@ -163,30 +188,48 @@ def _near_surface(group, rng, n: int, spread: float) -> np.ndarray:
 
 @pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both
 @pytest.mark.parametrize("thickness, crowded", [(THICKNESS, False), (0.03, True)])
-def test_each_points_list_gives_the_brute_force_contacts_as_the_points_move(tmp_path, thickness, crowded):
+def test_each_points_list_holds_what_the_tests_need_and_its_planes_keep_the_thickness_as_the_points_move(
+        tmp_path, thickness, crowded):
     # A finely tessellated torus (20,000 triangles) and a cloth of as many points as the test moves,
     # so that each keeps its own list. The points take small steps (most lists are kept), larger
     # ones (gathered afresh) and steps wider than a list reaches (the grid); with a thick cloth
     # many points have more triangles near them than a list holds, and ask the grid every time.
+    # Each step runs twice from the same lists: without room for planes, the tests decide every
+    # point and must give the brute-force answer bit for bit (the lists hold every triangle within
+    # reach); with the planes, a point they hold must keep the thickness (or end no nearer than the
+    # tests put it), cross nothing, and end near where the tests put it.
     n = 900
     text = _scene(tmp_path, torus_obj(TORUS[0], TORUS[1], 100, 100),
-                  {"path": "shape.obj", "friction": 0.3, "translate": [0.5, 0.3, 0.5], "rotation": [10, 0, 25]},
+                  {"path": "shape.obj", "friction": 0.0, "translate": [0.5, 0.3, 0.5], "rotation": [10, 0, 25]},
                   cloth=_cloth(30, thickness=thickness))
     group = mesh_group(load_scene(text))
     assert group.tris.shape[0] == 20000 and group.near_n.shape == (1, n)
+    lists = ("near_at", "near_n", "near_tris", "near_d", "near_ref", "near_pl")
+    shift = group.pose[0, :3].copy()
     rng = np.random.default_rng(3)
     last = _near_surface(group, rng, n, 2.0 * thickness)
-    moved = 0
-    for step, spread in enumerate((0.2, 0.01, 0.01, 0.3, 0.01, 3.0, 0.01)):
+    moved = held = 0
+    for step, spread in enumerate((0.2, 0.01, 0.01, 0.3, 0.01, 3.0, 0.01, 0.05)):
         pos = last + rng.normal(0.0, spread * thickness, last.shape)
         anchors = group.near_at.copy()
-        grid = mesh_targets(pos, last, group, False)
+        saved = [getattr(group, name).copy() for name in lists]
+        tests = mesh_targets(pos, last, _without_planes(group), False)
         brute = mesh_targets(pos, last, group, True)
-        assert grid.tobytes() == brute.tobytes(), step
-        moved += int(np.any(grid != pos, axis=0).sum())
+        assert tests.tobytes() == brute.tobytes(), step
+        for name, array in zip(lists, saved):
+            getattr(group, name)[...] = array
+        out = mesh_targets(pos, last, group, False)
+        by_planes = np.any(out != brute, axis=0)
+        held += int(by_planes.sum())
+        dist, crossed = _distance_and_crossing(last[:, by_planes], out[:, by_planes], group.verts, group.tris, shift)
+        kept, _ = _distance_and_crossing(last[:, by_planes], brute[:, by_planes], group.verts, group.tris, shift)
+        assert np.all(dist >= np.minimum(kept, thickness) * (1.0 - 1e-9)), step
+        assert not crossed.any(), step
+        assert np.all(np.linalg.norm(out - brute, axis=0) <= 0.5 * thickness), step
+        moved += int(np.any(out != pos, axis=0).sum())
         if step == 2:  # after two small steps most lists were kept
             assert np.all(group.near_at == anchors, axis=2).sum() > n // 2
-        last = grid
+        last = out
     assert moved > n  # the points met the mesh: the comparison is not vacuous
     listed = group.near_n[0] >= 0
     too_many = np.isfinite(group.near_at[0, :, 0]) & ~listed  # gathered, and more than a list holds
@@ -194,6 +237,7 @@ def test_each_points_list_gives_the_brute_force_contacts_as_the_points_move(tmp_
         assert too_many.sum() > n // 4
     else:
         assert listed.sum() > n // 2
+        assert held > n // 4  # the planes decided many points
 
 
 @pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both
@@ -201,7 +245,10 @@ def test_each_list_is_nearest_first_with_each_triangles_distance_from_where_it_w
     # The pass reads a list only while a triangle's distance from the list's reference point (less
     # the slack), less the point's distance from it, is within r: the distances must be those of the
     # triangles, in order, from that point: the anchor when the list is gathered, and where the
-    # point is once it has drifted REFRESH thicknesses from there (the list itself kept).
+    # point is once it has drifted REFRESH thicknesses from there (the list itself kept). The first
+    # NEAR_PLANES triangles carry their separating planes from the same point: the unit vector from
+    # the triangle's closest point to it, offset by the corner furthest along it; none for a point
+    # inside the (closed) torus.
     text = _scene(tmp_path, torus_obj(*TORUS), {"path": "shape.obj", "translate": [0.5, 0.3, 0.5], "friction": 0.3},
                   cloth=_cloth(30))
     group = mesh_group(load_scene(text))
@@ -209,6 +256,9 @@ def test_each_list_is_nearest_first_with_each_triangles_distance_from_where_it_w
     pos = _near_surface(group, rng, 900, 1.5 * THICKNESS)
     slack = group.info[0, INFO_NEAR] - group.info[0, INFO_NEAR_OK]
     shift = group.pose[0, :3]
+    ring, tube, _, sides = TORUS
+    sag = tube * (1.0 - np.cos(np.pi / sides))  # the faces lie within this of the smooth torus, inside it
+    sides_seen = set()
 
     def check(points):
         for p in points:
@@ -219,6 +269,18 @@ def test_each_list_is_nearest_first_with_each_triangles_distance_from_where_it_w
             exact = [np.linalg.norm(ref - np.array(closest_on_triangle(*ref, *group.verts[group.tris[t]].reshape(-1))[:3]))
                      for t in tris]
             assert np.allclose(dist, np.array(exact) - slack, rtol=0.0, atol=1e-12)
+            smooth = np.hypot(np.hypot(ref[0], ref[2]) - ring, ref[1]) - tube  # signed, the smooth torus's
+            planes = group.near_pl[0, p, :min(k, NEAR_PLANES)]
+            if smooth < -sag - 1e-4:  # surely inside the faces
+                assert np.all(planes[:, 3] == np.inf), p
+                sides_seen.add("inside")
+            elif smooth > 0.0:  # surely outside
+                normal, offset = planes[:, :3], planes[:, 3]
+                corners = group.verts[group.tris[tris[:normal.shape[0]]]]  # (P, 3, 3)
+                assert np.allclose(np.linalg.norm(normal, axis=1), 1.0, rtol=0.0, atol=1e-12)
+                assert np.allclose(offset, np.einsum("pc,pkc->pk", normal, corners).max(axis=1), rtol=0.0, atol=1e-15)
+                assert np.allclose(normal @ ref - offset, dist[:normal.shape[0]] + slack, rtol=0.0, atol=1e-12)
+                sides_seen.add("outside")
 
     mesh_targets(pos, pos, group, False)
     listed = np.flatnonzero(group.near_n[0] > 1)
@@ -238,6 +300,7 @@ def test_each_list_is_nearest_first_with_each_triangles_distance_from_where_it_w
     assert remeasured.size > 50, remeasured.size
     assert np.allclose(group.near_ref[0, remeasured], (moved[:, remeasured] - shift[:, None]).T, rtol=0.0, atol=0.0)
     check(remeasured[:80])
+    assert sides_seen == {"inside", "outside"}
 
 
 @pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both
@@ -469,7 +532,7 @@ def test_the_memory_check_counts_each_meshs_lists_per_point(tmp_path, monkeypatc
 
     mesh = {"path": "shape.obj", "translate": [0.5, 0.3, 0.5], "friction": 0.3}
     group = mesh_group(load_scene(_scene(tmp_path, torus_obj(*TORUS), mesh, cloth=_cloth(30))))
-    lists = (group.near_at, group.near_n, group.near_tris, group.near_d, group.near_ref)
+    lists = (group.near_at, group.near_n, group.near_tris, group.near_d, group.near_ref, group.near_pl)
     assert MESH_BYTES_PER_POINT >= 1.25 * sum(a.nbytes for a in lists) / 900
     monkeypatch.setattr(scene_module, "available_memory", lambda: 900 * BYTES_PER_POINT + 100)
     load_scene(_scene(tmp_path, torus_obj(*TORUS), None, cloth=_cloth(30)))  # fits without the mesh

@@ -42,10 +42,15 @@ _FRICTION = V.number(ge=0.0, le=1.0)
 #: Most triangles a cloth point's list of near triangles holds, per mesh (more: that point asks
 #: the mesh's grid, every substep; see :mod:`clothsim.sim.passes.colliders.mesh`).
 NEAR_ROOM = 64
+#: How many of a list's nearest triangles carry a separating plane (a point whose reachable
+#: triangles go further down its list is handled by the exact tests; see
+#: :mod:`clothsim.sim.passes.colliders.mesh`).
+NEAR_PLANES = 16
 #: Memory each mesh adds per cloth point, for the memory check: counted from the pass's arrays
-#: (the list's anchor and reference point, 2 x 3 x 8 B, its length, 8 B, and per triangle its index
-#: and distance, 4 + 8 B), not measured, plus 25 % as for every figure of that check.
-MESH_BYTES_PER_POINT = int(1.25 * (2 * 3 * 8 + 8 + NEAR_ROOM * (4 + 8)))
+#: (the list's anchor and reference point, 2 x 3 x 8 B, its length, 8 B, per triangle its index
+#: and distance, 4 + 8 B, and per plane its normal and offset, 4 x 8 B), not measured, plus 25 % as
+#: for every figure of that check.
+MESH_BYTES_PER_POINT = int(1.25 * (2 * 3 * 8 + 8 + NEAR_ROOM * (4 + 8) + NEAR_PLANES * 4 * 8))
 
 
 @dataclass(frozen=True, eq=False)

@@ -44,9 +44,31 @@ passed over before its list is read, as is one further than r from the mesh's bo
 test the lengths are bounded from above by their sums of components (no square root). What is
 passed over could neither come within r nor be crossed, so no answer changes.
 
-Ties between triangles are broken by the lower triangle index, so the answer does not depend on
-the order triangles come in, and equals the brute-force one (:func:`mesh_targets`) bit for bit.
-Each point's list is written only by the work item that owns the point.
+A point whose list is valid is then held by separating planes instead of those tests (the contact
+rule of a listed point). When a list is measured, each of its first ``NEAR_PLANES`` triangles gets
+the plane through its support point facing the reference point: normal n = (reference - c) /
+|reference - c|, c the triangle's closest point to the reference, offset the largest n . v of its
+corners (= n . c). The whole triangle lies on the plane's inner side, n . x <= offset, whatever
+rounding made of n. A substep takes the triangles the bound above lets through, nearest first,
+and for each in turn pushes the point along n until n . q - offset = thickness where it is less
+(so no friction where none is violated). As long as the last position is strictly on each such
+plane's outer side, and the corrected position is too (checked after the pushes, since one push
+can take back part of another where planes face each other), the segment between them stays on
+that side (a half-space is convex) and cannot cross the triangle; a point pushed out of a plane
+ends at least the thickness from its triangle (unless a later push in a crease takes part of it
+back, as the tests, which push from the nearest triangle alone, leave a crease's second face to
+the next substep). For a point resting on a face, n is the
+face's normal and the push is the tests' push; near an edge or a corner the plane is the tangent
+plane of the distance at the reference, a little more cautious than the tests as the point moves
+away from it (by the drift, which the remeasuring keeps under ``REFRESH`` thicknesses). The
+planes cost a dot product a triangle, the tests a closest point and often a crossing test. The
+tests decide instead for a point without a list, a point with a reachable triangle past the
+first ``NEAR_PLANES``, a last or corrected position not strictly outside a reachable triangle's
+plane, and a closed mesh's list measured from inside it (no planes then).
+
+In the tests, ties between triangles are broken by the lower triangle index, so their answer does
+not depend on the order triangles come in, and equals the brute-force one (:func:`mesh_targets`)
+bit for bit. Each point's list is written only by the work item that owns the point.
 """
 
 from __future__ import annotations
@@ -67,8 +89,8 @@ from .meshgrid import MeshGroup, mesh_group, DIMS_CELL0, DIMS_CLOSED, DIMS_N, DI
     INFO_HI, INFO_INV_H, INFO_LO, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK
 from ...team import share
 
-#: How far (in thicknesses) a point may drift from where its list's distances were measured
-#: before they are measured again from where it is (see the module's docstring).
+#: How far (in thicknesses) a point may drift from where its list's distances and planes were
+#: measured before they are measured again from where it is (see the module's docstring).
 REFRESH = 0.2
 #: How much longer than a sum of absolute components the early test takes a length to be.
 _LONGER = 1.0 + 1e-9
@@ -297,11 +319,28 @@ def gather_near(mesh: tuple, m: int, p: int, qx: float, qy: float, qz: float) ->
     return count
 
 
+@njit(inline="always", **EXACT)
+def _separating(verts: np.ndarray, a: int, b: int, c: int, dx: float, dy: float, dz: float, length: float
+                ) -> tuple[float, float, float, float]:
+    """The plane (unit normal, offset) with triangle abc on its inner side, facing along (dx, dy,
+    dz) (reference - closest point, of ``length``): the offset is the largest n . v of the corners,
+    so it holds the whole triangle whatever the rounding of n. No plane (offset +inf) for a
+    reference on the triangle."""
+    if length == 0.0:
+        return 0.0, 0.0, 0.0, np.inf
+    nx, ny, nz = dx / length, dy / length, dz / length
+    off = nx * verts[a, 0] + ny * verts[a, 1] + nz * verts[a, 2]
+    off = max(off, nx * verts[b, 0] + ny * verts[b, 1] + nz * verts[b, 2])
+    off = max(off, nx * verts[c, 0] + ny * verts[c, 1] + nz * verts[c, 2])
+    return nx, ny, nz, off
+
+
 @njit(**BORROWED)
 def measure_list(mesh: tuple, m: int, p: int, count: int, qx: float, qy: float, qz: float) -> None:
     """Point ``p``'s list of mesh ``m`` (``count`` triangles) sorted nearest first from q, each
-    triangle's distance from q, less the list's slack, in ``near_d[m, p]``; q becomes the list's
-    reference, ``near_ref[m, p]``."""
+    triangle's distance from q, less the list's slack, in ``near_d[m, p]``, and the first
+    ``NEAR_PLANES`` triangles' separating planes from q in ``near_pl[m, p]`` (none when q is
+    inside a closed mesh); q becomes the list's reference, ``near_ref[m, p]``."""
     # A triangle's distance from the reference bounds its distance from any later q from below
     # (less |q - reference|), so a substep reads the list only as far as that bound is within r.
     # The slack (the list's own, far beyond the rounding of either distance) keeps the bound
@@ -310,23 +349,78 @@ def measure_list(mesh: tuple, m: int, p: int, count: int, qx: float, qy: float, 
     slack = info[m, INFO_NEAR] - info[m, INFO_NEAR_OK]
     near = mesh.near_tris
     dist = mesh.near_d
+    planes = mesh.near_pl
+    room = planes.shape[2]
     verts = mesh.verts
     tris = mesh.tris
+    bd, bt, bf, bcx, bcy, bcz = np.inf, -1, FACE, 0.0, 0.0, 0.0
     for j in range(count):
         t = near[m, p, j]
         a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
-        px, py, pz, _ = closest_on_triangle(qx, qy, qz, verts[a, 0], verts[a, 1], verts[a, 2], verts[b, 0],
+        px, py, pz, f = closest_on_triangle(qx, qy, qz, verts[a, 0], verts[a, 1], verts[a, 2], verts[b, 0],
                                             verts[b, 1], verts[b, 2], verts[c, 0], verts[c, 1], verts[c, 2])
-        d = math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2) - slack
+        length = math.sqrt((qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2)
+        if length < bd or (length == bd and t < bt):
+            bd, bt, bf, bcx, bcy, bcz = length, t, f, px, py, pz
+        nx, ny, nz, off = _separating(verts, a, b, c, qx - px, qy - py, qz - pz, length)
+        d = length - slack
         i = j
         while i > 0 and dist[m, p, i - 1] > d:  # insertion sort: a list holds a few triangles
             dist[m, p, i] = dist[m, p, i - 1]
             near[m, p, i] = near[m, p, i - 1]
+            if i < room:
+                for k in range(4):
+                    planes[m, p, i, k] = planes[m, p, i - 1, k]
             i -= 1
         dist[m, p, i] = d
         near[m, p, i] = t
+        if i < room:
+            planes[m, p, i, 0], planes[m, p, i, 1], planes[m, p, i, 2], planes[m, p, i, 3] = nx, ny, nz, off
+    if bt >= 0 and mesh.dims[m, DIMS_CLOSED] != 0:
+        # inside a closed mesh the planes would face inwards and hold the point there
+        nx, ny, nz = pseudo_normal(mesh, bt, bf)
+        if (qx - bcx) * nx + (qy - bcy) * ny + (qz - bcz) * nz < 0.0:
+            for j in range(min(count, room)):
+                planes[m, p, j, 3] = np.inf
     ref = mesh.near_ref
     ref[m, p, 0], ref[m, p, 1], ref[m, p, 2] = qx, qy, qz
+
+
+@njit(inline="always", **EXACT)
+def _against_planes(mesh: tuple, m: int, p: int, count: int, within: float, lx: float, ly: float, lz: float,
+                    qx: float, qy: float, qz: float) -> tuple[int, float, float, float]:
+    """Point ``p`` (last ``l``, now ``q``) against the separating planes of the triangles of its list
+    whose bound is within ``within``, nearest first (see the module's docstring): (1 contact or 0
+    none, the corrected position before friction); -1 when one of those triangles has no plane, or
+    its plane does not have ``l`` strictly on its outer side (the tests decide then)."""
+    planes = mesh.near_pl
+    dist = mesh.near_d
+    th = mesh.thickness
+    hit = 0
+    ox, oy, oz = qx, qy, qz
+    read = 0
+    for j in range(count):
+        if dist[m, p, j] > within:
+            break
+        if j == planes.shape[2]:
+            return -1, qx, qy, qz
+        nx, ny, nz, off = planes[m, p, j, 0], planes[m, p, j, 1], planes[m, p, j, 2], planes[m, p, j, 3]
+        if not nx * lx + ny * ly + nz * lz - off > 0.0:  # also no plane: offset +inf
+            return -1, qx, qy, qz
+        s = nx * ox + ny * oy + nz * oz - off
+        if s < th:
+            push = th - s
+            ox, oy, oz = ox + nx * push, oy + ny * push, oz + nz * push
+            hit = 1
+        read = j + 1
+    if hit:
+        # a push can take a point back over a plane read before it (planes facing each other, as
+        # across a thin part of the mesh): the point must end strictly outside every one
+        for j in range(read):
+            nx, ny, nz, off = planes[m, p, j, 0], planes[m, p, j, 1], planes[m, p, j, 2], planes[m, p, j, 3]
+            if not nx * ox + ny * oy + nz * oz - off > 0.0:
+                return -1, qx, qy, qz
+    return hit, ox, oy, oz
 
 
 @njit(**BORROWED)
@@ -379,7 +473,7 @@ def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, 
                   brute: bool) -> tuple[bool, float, float, float]:
     """Collide point ``p`` (mesh frame: last ``l``, now ``q``) with mesh ``m``: (contact?, the
     corrected position before friction). ``brute`` tests every triangle instead of the point's
-    list or the grid's cells (same answer)."""
+    list or the grid's cells, and holds no point by its list's planes (the tests' answer)."""
     info = mesh.info
     r = mesh.thickness + math.sqrt((qx - lx) ** 2 + (qy - ly) ** 2 + (qz - lz) ** 2)
     if (qx + r < info[m, INFO_LO] or qx - r > info[m, INFO_HI] or qy + r < info[m, INFO_LO + 1]
@@ -412,10 +506,13 @@ def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, 
                 near_n[m, p] = count
                 at[m, p, 0], at[m, p, 1], at[m, p, 2] = qx, qy, qz
     if count >= 0:
+        within = r + moved
+        held, ox, oy, oz = _against_planes(mesh, m, p, count, within, lx, ly, lz, qx, qy, qz)
+        if held >= 0:
+            return held == 1, ox, oy, oz
         tbox = mesh.tbox
         near = mesh.near_tris
         dist = mesh.near_d
-        within = r + moved
         r2 = r * r
         bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
         for j in range(count):
@@ -494,7 +591,8 @@ def collide_meshes_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, me
 @njit(**EXACT)
 def mesh_targets(pos: np.ndarray, last: np.ndarray, mesh: tuple, brute: bool) -> np.ndarray:
     """Every point of (3, N) ``pos`` collided with every mesh (held at the start of its current
-    pose), on a copy: the grid's answer, or the brute-force one (for tests)."""
+    pose), on a copy: the pass's answer (lists, their planes, the grid), or that of the tests on
+    every triangle (``brute``, for tests)."""
     out = pos.copy()
     free = np.arange(pos.shape[1])
     for m in range(mesh.dims.shape[0]):
@@ -562,8 +660,8 @@ def _untracked(g: MeshGroup) -> MeshGroup:
     # the mesh pass reads the poses, never the tracks: without them its type is the same for a
     # moving mesh and a fixed one, so both run one compiled pass
     return MeshGroup(g.verts, g.tris, g.tbox, g.fnorm, g.enorm, g.vnorm, g.info, g.dims, g.cell_start, g.cell_tris,
-                     g.cell_box, g.near_at, g.near_n, g.near_tris, g.near_d, g.near_ref, g.pose, g.thickness, g.on,
-                     None, g.collide)
+                     g.cell_box, g.near_at, g.near_n, g.near_tris, g.near_d, g.near_ref, g.near_pl, g.pose,
+                     g.thickness, g.on, None, g.collide)
 
 
 @njit(**EXACT)

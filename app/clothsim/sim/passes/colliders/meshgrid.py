@@ -30,7 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ....meshcollider import NEAR_ROOM
+from ....meshcollider import NEAR_PLANES, NEAR_ROOM
 from ....scene import Scene
 from ...clock import track_at
 from .moving import Tracks, pack_tracks
@@ -68,6 +68,8 @@ class MeshGroup(NamedTuple):
     near_tris: np.ndarray  # (M, N, NEAR_ROOM) int32 the list: every triangle whose box comes within reach
     near_d: np.ndarray  # (M, N, NEAR_ROOM) each listed triangle's distance from near_ref, less a slack; ascending
     near_ref: np.ndarray  # (M, N, 3) where those distances were measured (mesh frame)
+    near_pl: np.ndarray  # (M, N, NEAR_PLANES, 4) the first listed triangles' separating planes from near_ref:
+    # unit normal, offset (+inf: none)
     pose: np.ndarray  # (M, 6) translation at the substep's start and at its end
     thickness: float
     on: np.ndarray  # (M,) bool: the reach flags
@@ -207,6 +209,7 @@ def mesh_group(scene: Scene, clock: np.ndarray | None = None, dt: float = 0.0) -
                      np.full((len(scene.meshes), n_points), -1, dtype=np.int64),
                      np.zeros((len(scene.meshes), n_points, NEAR_ROOM), dtype=np.int32),
                      np.zeros((len(scene.meshes), n_points, NEAR_ROOM)), np.zeros((len(scene.meshes), n_points, 3)),
+                     np.zeros((len(scene.meshes), n_points, NEAR_PLANES, 4)),
                      pose, float(thickness),
                      np.zeros(len(scene.meshes), dtype=np.bool_),
                      None if clock is None else pack_tracks(scene.meshes, clock, dt))
