@@ -129,6 +129,11 @@ def _start_workers(executor: ProcessPoolExecutor, count: int) -> None:
         started = [executor.submit(os.getpid) for _ in range(count)]
     finally:
         if main and previous is not None:
+            # A Ctrl-C held for this thread is taken here, still blocked: unblocked, it would run
+            # the handler above only at the interpreter's next check, which may come after the
+            # previous handler is back (then a SIG_IGN drops it, "ignored due to race condition").
+            if signal.SIGINT in signal.sigpending() and signal.sigtimedwait({signal.SIGINT}, 0) is not None:
+                held.append(signal.SIGINT)
             signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
             signal.signal(signal.SIGINT, previous)
     if held:
