@@ -3,7 +3,8 @@ leaves: ``python tests/tools/contact_bench.py --sizes 50 100 256``.
 
 Each size runs ``selfCollision`` scaled to n x n points (same cloth, same thickness). The modes are
 timed alternately, repeat by repeat, after a warm-up, so both see the same load; the medians are
-printed with the contact mode's ratio to the spec's and its cost per point.
+printed with the contact mode's ratio to the spec's, its cost per point, its whole rebuilds a
+frame, and the substeps a frame that moved some points' references (and the points each moved).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 
 from clothsim.scene import load_scene
 from clothsim.sim import Simulation
+from clothsim.sim.passes.contact import LOCALS, MOVED, REBUILDS
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 
@@ -32,7 +34,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--repeats", type=int, default=5)
     args = p.parse_args(argv)
     base = load_scene(SCENES / f"{args.scene}.json")
-    print(f"{'n':>5}{'mode':>9}{'ms/frame':>10}{'us/point':>10}{'vs spec':>9}{'rebuilds/frame':>16}", flush=True)
+    print(f"{'n':>5}{'mode':>9}{'ms/frame':>10}{'us/point':>10}{'vs spec':>9}{'rebuilds/frame':>16}"
+          f"{'moves/frame':>13}{'points/move':>13}", flush=True)
     for n in args.sizes:
         sims = {}
         for mode in args.modes:
@@ -42,21 +45,27 @@ def main(argv: list[str] | None = None) -> int:
             sims[mode] = sim
         samples: dict[str, list[float]] = {m: [] for m in args.modes}
         rebuilt: dict[str, int] = dict.fromkeys(args.modes, 0)
+        moves: dict[str, int] = dict.fromkeys(args.modes, 0)
+        moved: dict[str, int] = dict.fromkeys(args.modes, 0)
         for _ in range(args.repeats):
             for mode, sim in sims.items():
                 c = sim._kernel_args.contact
-                before = 0 if c is None else int(c.meta[3])
+                before = None if c is None else c.meta.copy()
                 t0 = time.perf_counter()
                 sim.step(args.frames)
                 samples[mode].append((time.perf_counter() - t0) / args.frames * 1e3)
                 if c is not None:
-                    rebuilt[mode] += int(c.meta[3]) - before
+                    rebuilt[mode] += int(c.meta[REBUILDS] - before[REBUILDS])
+                    moves[mode] += int(c.meta[LOCALS] - before[LOCALS])
+                    moved[mode] += int(c.meta[MOVED] - before[MOVED])
         med = {m: statistics.median(v) for m, v in samples.items()}
         for mode in args.modes:
             ratio = med[mode] / med["spec"] if "spec" in med else float("nan")
             rb = rebuilt[mode] / (args.frames * args.repeats)
-            print(f"{n:>5}{mode:>9}{med[mode]:>10.2f}{med[mode] * 1e3 / (n * n):>10.3f}{ratio:>9.2f}{rb:>16.1f}",
-                  flush=True)
+            mv = moves[mode] / (args.frames * args.repeats)
+            per = moved[mode] / max(moves[mode], 1)
+            print(f"{n:>5}{mode:>9}{med[mode]:>10.2f}{med[mode] * 1e3 / (n * n):>10.3f}{ratio:>9.2f}{rb:>16.1f}"
+                  f"{mv:>13.1f}{per:>13.1f}", flush=True)
         for mode, sim in sims.items():
             assert np.isfinite(sim.positions).all(), mode
             if n <= 100:

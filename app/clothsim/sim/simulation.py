@@ -22,7 +22,7 @@ from .passes.wind import triangles
 from ..jit import CHUNKS
 from ..jit.internals import packed_value
 from .passes.pins import move_pins
-from .passes.contact import CLAMPED, MOVING
+from .passes.contact import MOVING
 from .passes.colliders.mesh import MeshGroup, collide_address
 from .passes.colliders.moving import top_speed
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
@@ -477,15 +477,14 @@ class Simulation:
         # pins put elsewhere through the API since the last frame), so the cloth makes way for them
         # (see clothsim.sim.passes.contact.respond). Such a frame also starts from a fresh
         # reference, as every frame did before the reference was kept (the stress set's twist, its
-        # pins put elsewhere each frame, crossed itself without: 4 crossings at most on 16 x 16),
-        # and so does a frame after one in which the bound held a point back since the last
-        # rebuild: such a point waits for a new reference, at the latest until the next frame.
+        # pins put elsewhere each frame, crossed itself without: 4 crossings at most on 16 x 16).
+        # (A point the bound held back gets a new reference in the next substep.)
         contact = self._kernel_args.contact
         if contact is not None:
             moving = self._kernel_args.pins is not None or not np.array_equal(self._pos[:, self._pins],
                                                                               self._pins_seen)
             contact.meta[MOVING] = moving
-            if moving or contact.meta[CLAMPED]:
+            if moving:
                 self._forget_contacts()
 
     def _check_crossings(self) -> None:

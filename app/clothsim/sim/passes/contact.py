@@ -13,11 +13,13 @@ further apart than rounding. A state in which every point lies in its ball is cr
 is every state on the straight path from the reference to it (a ball is convex): two elements at
 distance d each move less than d/2. In each substep:
 
-1. (self-collision slot) if any point's position at the substep's start has left its ball, or
-   its position after the integrator would (for a pin, or a free point whose ball is not tiny:
-   ROOMY), the reference is rebuilt from the positions the substep started from (crossing-free,
-   by the same argument), and when there is none (the first substep, a frame whose pins move,
-   after ``reset``: the simulation clears ``meta[VALID]``);
+1. (self-collision slot) the points whose position after the integrator has left their ball
+   (a pin, or a free point whose ball is not tiny: ROOMY) or that the bound held back since
+   their reference was set have their references moved to where the substep started, one by
+   one (:func:`rereference`); the whole reference is rebuilt from there instead (crossing-free,
+   by the same argument) when more than ``LOCAL_SHARE`` of the points call for it, when a
+   point's position at the substep's start has left its ball, and when there is none (the first
+   substep, a frame whose pins move, after ``reset``: the simulation clears ``meta[VALID]``);
 2. (self-collision slot) every stored pair closer than the contact distance is pushed apart along its reference normal
    (inelastically, plus a fraction of the overlap), with Coulomb friction on the pair's relative
    tangential motion; corrections are averaged per point (Jacobi, in pair order), in one sweep,
@@ -33,8 +35,9 @@ each point in its own cell; each edge's box, widened by half of it, once in the 
 corner, read by the other edges from the cells where an overlapping box can start. A rebuild is
 cut into ``PARTS`` parts, ranges of the points and of the edges (:func:`search`), which the thread
 team's members search side by side; the first member joins them in order (:func:`join`), so the
-pairs and balls are one sweep's whoever searched what. Between rebuilds a substep costs three
-passes over the points and one over the stored pairs.
+pairs and balls are one sweep's whoever searched what. Moving a few points' references finds
+what is near them through cells kept up to date as they move (:mod:`.nearby`). Between rebuilds
+a substep costs three passes over the points and one over the stored pairs.
 """
 
 from __future__ import annotations
@@ -46,6 +49,8 @@ from numba import njit
 
 from ...jit import BORROWED, CHUNKS, EXACT, KERNEL
 from ..team import share
+from .nearby import Cells, Nearby, box_key, cell_of, element_box, extent, key_of, list_all, listed_in, nearby_index, \
+    relist, slot_of
 from .selfcollide import _cell_key
 
 #: Fraction of the distance to the nearest other element a point may move from its reference.
@@ -89,10 +94,16 @@ PARTS = 32
 STALE, FIRST, END, SIZE, CUT = range(5)
 FLAG = 5
 
+#: A substep whose points about to leave their balls are more than this fraction of the cloth
+#: rebuilds the whole reference (one search of the cloth, shared by the team) instead of moving
+#: those points' references one by one (:func:`rereference`, run by one member).
+LOCAL_SHARE = 1.0 / 128.0
+
 # meta fields (MOVING: 1 in a frame whose pins move, set by the simulation; CLAMPED: 1 when the
-# bound has moved a point since the last rebuild)
-VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE, MOVING, CLAMPED = 0, 1, 2, 3, 4, 5, 6, 7
-META = 8
+# bound has moved a point since its reference was set; REBUILDS counts the whole rebuilds, LOCALS
+# the substeps that moved some points' references, MOVED those points)
+VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE, MOVING, CLAMPED, LOCALS, MOVED = range(10)
+META = 10
 
 
 class Contact(NamedTuple):
@@ -101,7 +112,8 @@ class Contact(NamedTuple):
     indices (2, P) and weights + normal (6, P); edge-edge: indices (2, Q) and parameters + normal
     (5, Q)), the Jacobi sums, ``meta`` counters (see VALID ... UNSAFE), a rebuild's work space
     (each member's bounds on the balls, each part's pairs found and cost, see :func:`search`), the
-    contact distance, the query radius and the broad phase's cell edge."""
+    points by cell and the elements by point (for :func:`rereference`), the contact distance,
+    the query radius and the broad phase's cell edge."""
 
     tris: np.ndarray
     edges: np.ndarray
@@ -118,6 +130,7 @@ class Contact(NamedTuple):
     dmins: np.ndarray
     found: np.ndarray
     cost: np.ndarray
+    near: Nearby
     thickness: float
     radius: float
     cell: float
@@ -142,11 +155,12 @@ def contact_group(pos: np.ndarray, tris: np.ndarray, movable: np.ndarray, thickn
     radius = REACH * h
     n = pos.shape[1]
     cap = 16 * n + 64
+    cell = max(radius, 2.0 * float(np.median(lengths)))
     return Contact(tris, edges, np.ascontiguousarray(movable, dtype=np.bool_), np.zeros((3, n)), np.zeros(n),
                    np.zeros((2, cap), dtype=np.int64), np.zeros((6, cap)), np.zeros((2, cap), dtype=np.int64),
                    np.zeros((5, cap)), np.zeros((3, n)), np.zeros(n, dtype=np.int64), np.zeros(META, dtype=np.int64),
-                   np.zeros((CHUNKS, n)), np.zeros((PARTS, 2), dtype=np.int64), np.zeros(PARTS, dtype=np.int64), h,
-                   radius, max(radius, 2.0 * float(np.median(lengths))))
+                   np.zeros((CHUNKS, n)), np.zeros((PARTS, 2), dtype=np.int64), np.zeros(PARTS, dtype=np.int64),
+                   nearby_index(n, tris, edges, cell), h, radius, cell)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -239,19 +253,6 @@ def closest_on_segments(p1x: float, p1y: float, p1z: float, q1x: float, q1y: flo
 
 
 @njit(inline="always", **KERNEL)
-def _cell(v: float, inv: float) -> np.int64:
-    return np.int64(np.floor(v * inv))
-
-
-@njit(inline="always", **KERNEL)
-def _slot_of(key: np.int64, shift: np.uint64) -> np.int64:
-    # Fibonacci hashing: the top bits of key x 2^64 / phi. (Bits 32 and up, masked, had cells that
-    # differ only in x, 16 cells apart, share a slot: a third of the edge-edge candidates read
-    # belonged to another cell.)
-    return np.int64((np.uint64(key) * np.uint64(0x9E3779B97F4A7C15)) >> shift)
-
-
-@njit(inline="always", **KERNEL)
 def _table_size(entries: int) -> np.int64:
     """Slots for a table of ``entries``: a power of two at least twice as many, and at least 2."""
     table = np.int64(2)
@@ -288,9 +289,9 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
     inv = 1.0 / cell
     total = 0
     for k in range(m):
-        nx = _cell(box[3, k], inv) - _cell(box[0, k], inv) + 1
-        ny = _cell(box[4, k], inv) - _cell(box[1, k], inv) + 1
-        nz = _cell(box[5, k], inv) - _cell(box[2, k], inv) + 1
+        nx = cell_of(box[3, k], inv) - cell_of(box[0, k], inv) + 1
+        ny = cell_of(box[4, k], inv) - cell_of(box[1, k], inv) + 1
+        nz = cell_of(box[5, k], inv) - cell_of(box[2, k], inv) + 1
         total += nx * ny * nz
     table = _table_size(total)
     shift = _shift_of(table)
@@ -299,16 +300,16 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
     start = np.zeros(table + 1, dtype=np.int64)
     i = 0
     for k in range(m):
-        x0, x1 = _cell(box[0, k], inv), _cell(box[3, k], inv)
-        y0, y1 = _cell(box[1, k], inv), _cell(box[4, k], inv)
-        z0, z1 = _cell(box[2, k], inv), _cell(box[5, k], inv)
+        x0, x1 = cell_of(box[0, k], inv), cell_of(box[3, k], inv)
+        y0, y1 = cell_of(box[1, k], inv), cell_of(box[4, k], inv)
+        z0, z1 = cell_of(box[2, k], inv), cell_of(box[5, k], inv)
         for ix in range(x0, x1 + 1):
             for iy in range(y0, y1 + 1):
                 for iz in range(z0, z1 + 1):
                     key = _cell_key(ix, iy, iz)
                     keys[i] = key
                     ids[i] = k
-                    start[_slot_of(key, shift)] += 1
+                    start[slot_of(key, shift)] += 1
                     i += 1
     _slot_ends(start, table)
     skeys = np.empty(total, dtype=np.int64)
@@ -317,7 +318,7 @@ def cell_table(box: np.ndarray, cell: float) -> tuple:
     # their order, and start ends up at each slot's first, with no copy of the starts as cursors,
     # which cost several times the placing itself: docs/self-collision.md, Cost)
     for j in range(total - 1, -1, -1):
-        s = _slot_of(keys[j], shift)
+        s = slot_of(keys[j], shift)
         start[s] -= 1
         skeys[start[s]] = keys[j]
         sids[start[s]] = ids[j]
@@ -337,14 +338,14 @@ def corner_table(box: np.ndarray, cell: float) -> tuple:
     keys = np.empty(m, dtype=np.int64)
     start = np.zeros(table + 1, dtype=np.int64)
     for k in range(m):
-        key = _cell_key(_cell(box[0, k], inv), _cell(box[1, k], inv), _cell(box[2, k], inv))
+        key = _cell_key(cell_of(box[0, k], inv), cell_of(box[1, k], inv), cell_of(box[2, k], inv))
         keys[k] = key
-        start[_slot_of(key, shift)] += 1
+        start[slot_of(key, shift)] += 1
     _slot_ends(start, table)
     skeys = np.empty(m, dtype=np.int64)
     sids = np.empty(m, dtype=np.int64)
     for k in range(m - 1, -1, -1):  # (as in cell_table)
-        s = _slot_of(keys[k], shift)
+        s = slot_of(keys[k], shift)
         start[s] -= 1
         skeys[start[s]] = keys[k]
         sids[start[s]] = k
@@ -702,8 +703,8 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
         p0, p1 = share(n, part, parts)
         cost = np.int64(0)
         for p in range(p0, p1):
-            key = _cell_key(_cell(x[0, p], inv), _cell(x[1, p], inv), _cell(x[2, p], inv))
-            s = _slot_of(key, shift)
+            key = _cell_key(cell_of(x[0, p], inv), cell_of(x[1, p], inv), cell_of(x[2, p], inv))
+            s = slot_of(key, shift)
             cost += start[s + 1] - start[s]
             for i in range(start[s], start[s + 1]):
                 if keys[i] != key:
@@ -730,14 +731,14 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
         nb = np.int64(0)
         f0, f1 = share(ne, part, parts)
         for e1 in range(f0, f1):
-            x0, x1 = _cell(ebox[0, e1], einv) - 1, _cell(ebox[3, e1], einv)
-            y0, y1 = _cell(ebox[1, e1], einv) - 1, _cell(ebox[4, e1], einv)
-            z0, z1 = _cell(ebox[2, e1], einv) - 1, _cell(ebox[5, e1], einv)
+            x0, x1 = cell_of(ebox[0, e1], einv) - 1, cell_of(ebox[3, e1], einv)
+            y0, y1 = cell_of(ebox[1, e1], einv) - 1, cell_of(ebox[4, e1], einv)
+            z0, z1 = cell_of(ebox[2, e1], einv) - 1, cell_of(ebox[5, e1], einv)
             for ix in range(x0, x1 + 1):
                 for iy in range(y0, y1 + 1):
                     for iz in range(z0, z1 + 1):
                         key = _cell_key(ix, iy, iz)
-                        s = _slot_of(key, eshift)
+                        s = slot_of(key, eshift)
                         # a slot lists its edges in increasing order: start past e1 (only later edges
                         # are tested, each pair once), in the order the whole slot would be read
                         first = _after(eids, estart[s], estart[s + 1], e1)
@@ -837,12 +838,41 @@ def join(x: np.ndarray, c: Contact, parts: int, rows: int) -> None:
             d = min(d, dmins[k, p])
         r = GAMMA * max(d - floor, 0.0)
         c.rho2[p] = r * r
+    _index_reference(c)
     c.meta[VALID] = 1
     c.meta[N_PT] = npt
     c.meta[N_EE] = nee
     c.meta[DROPPED] += lost_pt + lost_ee
     c.meta[REBUILDS] += 1
     c.meta[CLAMPED] = 0
+
+
+@njit(**BORROWED)
+def _index_reference(c: Contact) -> None:
+    # a new reference: every point, triangle and edge in its cell, no point held
+    nb = c.near
+    inv = 1.0 / nb.cell
+    x = c.ref
+    keys = nb.hits
+    for p in range(x.shape[1]):
+        keys[p] = key_of(x[0, p], x[1, p], x[2, p], inv)
+        nb.held[p] = False
+    list_all(nb.points, keys, x.shape[1])
+    nb.ext[0] = _index_elements(x, c.tris, nb.tri_box, c.radius, nb.tris, keys, inv)
+    nb.ext[1] = _index_elements(x, c.edges, nb.edge_box, 0.5 * c.radius, nb.edges, keys, inv)
+
+
+@njit(**BORROWED)
+def _index_elements(x: np.ndarray, ids: np.ndarray, box: np.ndarray, pad: float, cells: Cells, keys: np.ndarray,
+                    inv: float) -> float:
+    # the elements' boxes (widened by pad) and cells; returns the largest extent
+    most = 0.0
+    for e in range(ids.shape[1]):
+        element_box(x, ids, e, pad, box)
+        keys[e] = box_key(box, e, inv)
+        most = max(most, extent(box, e))
+    list_all(cells, keys, ids.shape[1])
+    return most
 
 
 @njit(**EXACT)
@@ -856,21 +886,30 @@ def rebuild(x: np.ndarray, c: Contact) -> None:
     join(x, c, flag[CUT], flag[SIZE])
 
 
+@njit(inline="always", **KERNEL)
+def _leaves(x: np.ndarray, c: Contact, p: int, roomy: float) -> bool:
+    """True when point ``p`` of ``x`` lies outside its ball and calls for a new reference: a
+    pinned point (it cannot wait clamped: its motion is prescribed), or a free point whose squared
+    radius is at least ``roomy`` (see ROOMY)."""
+    if c.rho2[p] < roomy and c.movable[p]:
+        return False
+    dx = x[0, p] - c.ref[0, p]
+    dy = x[1, p] - c.ref[1, p]
+    dz = x[2, p] - c.ref[2, p]
+    return dx * dx + dy * dy + dz * dz > c.rho2[p]
+
+
 @njit(**KERNEL)
-def _leaving(x: np.ndarray, c: Contact) -> bool:
-    """True when a pinned point, or a free point with a roomy ball (see ROOMY), lies outside its
-    ball in ``x`` (a pin cannot wait clamped for the next rebuild: its motion is prescribed)."""
-    ref = c.ref
-    rho2 = c.rho2
+def _leaving(x: np.ndarray, c: Contact, most: int) -> bool:
+    """True when more than ``most`` points of ``x`` call for a new reference: they are
+    :func:`_leaves`, or the bound has held them back since their reference was set."""
     roomy = (ROOMY * GAMMA * c.radius) ** 2
+    count = 0
     for p in range(x.shape[1]):
-        if rho2[p] < roomy and c.movable[p]:
-            continue
-        dx = x[0, p] - ref[0, p]
-        dy = x[1, p] - ref[1, p]
-        dz = x[2, p] - ref[2, p]
-        if dx * dx + dy * dy + dz * dz > rho2[p]:
-            return True
+        if c.near.held[p] or _leaves(x, c, p, roomy):
+            count += 1
+            if count > most:
+                return True
     return False
 
 
@@ -887,6 +926,232 @@ def _outside(x: np.ndarray, c: Contact) -> bool:
         if dx * dx + dy * dy + dz * dz > rho2[p] * (1.0 + 1e-6) + 1e-28:
             return True
     return False
+
+
+# ------------------------------------------------------------------------------------------------
+# a few points' references moved
+
+
+@njit(**EXACT)
+def rereference(pos: np.ndarray, last: np.ndarray, c: Contact) -> bool:
+    """Move the reference of each point about to leave its ball (:func:`_leaves`, in ``pos``) or
+    held back by the bound since its reference was set to where it started the substep
+    (``last``), find again every pair those points belong to, and give them new balls; the
+    other points' balls shrink where a new pair is nearer, and a point whose ball shrank so
+    that its starting position lies outside it is moved in a further round. Returns whether any
+    point was moved.
+
+    Why this keeps the guarantee: every point's starting position lies in its ball, so the
+    state ``last`` is joined to the reference by straight paths that keep every pair apart. Once
+    the rounds end, every pair closer than the query radius in the new reference (every such
+    pair that has a moved point is searched again, and the others kept their distances) bounds
+    the balls of its points, and every point's starting position lies in its ball: the new
+    reference is joined to ``last``, which has no crossing, by paths that keep every pair apart,
+    so it has none either, and the argument of the module's docstring holds from it.
+    """
+    return _rereference(pos, last, c, c.dmins[0])
+
+
+@njit(**BORROWED)
+def _rereference(pos: np.ndarray, last: np.ndarray, c: Contact, dmin: np.ndarray) -> bool:
+    nb = c.near
+    roomy = (ROOMY * GAMMA * c.radius) ** 2
+    nb.count[0] += 1
+    moving = nb.count[0]
+    k = 0
+    for p in range(pos.shape[1]):
+        if nb.held[p] or _leaves(pos, c, p, roomy):
+            nb.todo[k] = p
+            nb.mark[0, p] = moving
+            k += 1
+    if k == 0:
+        return False
+    npt = c.meta[N_PT]
+    nee = c.meta[N_EE]
+    cap_pt = c.pt.shape[1]
+    cap_ee = c.ee.shape[1]
+    done = 0
+    while done < k:
+        nb.count[0] += 1
+        now = nb.count[0]
+        _move_round(last, c, done, k, now)
+        npt = _drop_pt(c, npt, now)
+        nee = _drop_ee(c, nee, now)
+        for p in range(dmin.shape[0]):
+            dmin[p] = c.radius
+        npt, nee = _round_pairs(c, done, k, now, dmin, npt, nee)
+        # (pairs beyond the arrays' room are counted, as a rebuild counts them)
+        c.meta[DROPPED] += max(npt - cap_pt, 0) + max(nee - cap_ee, 0)
+        npt = min(npt, cap_pt)
+        nee = min(nee, cap_ee)
+        more = _round_balls(last, c, done, k, now, moving, dmin)
+        done = k
+        k = more
+    c.meta[N_PT] = npt
+    c.meta[N_EE] = nee
+    c.meta[LOCALS] += 1
+    c.meta[MOVED] += k
+    c.meta[CLAMPED] = 0
+    return True
+
+
+@njit(**BORROWED)
+def _move_round(last: np.ndarray, c: Contact, lo: int, hi: int, now: int) -> None:
+    # the round's points (todo[lo:hi]) to their starting positions, marked and listed in their
+    # cells; the elements they belong to marked, their boxes and cells made the new reference's
+    nb = c.near
+    ref = c.ref
+    inv = 1.0 / nb.cell
+    for i in range(lo, hi):
+        p = nb.todo[i]
+        nb.mark[1, p] = now
+        nb.held[p] = False
+        for ax in range(3):
+            ref[ax, p] = last[ax, p]
+        relist(nb.points, p, key_of(ref[0, p], ref[1, p], ref[2, p], inv))
+    for i in range(lo, hi):
+        p = nb.todo[i]
+        for j in range(nb.tri_at[p], nb.tri_at[p + 1]):
+            t = nb.tri_ids[j]
+            if nb.tri_mark[t] != now:
+                nb.tri_mark[t] = now
+                element_box(ref, c.tris, t, c.radius, nb.tri_box)
+                relist(nb.tris, t, box_key(nb.tri_box, t, inv))
+                nb.ext[0] = max(nb.ext[0], extent(nb.tri_box, t))
+        for j in range(nb.edge_at[p], nb.edge_at[p + 1]):
+            e = nb.edge_ids[j]
+            if nb.edge_mark[e] != now:
+                nb.edge_mark[e] = now
+                element_box(ref, c.edges, e, 0.5 * c.radius, nb.edge_box)
+                relist(nb.edges, e, box_key(nb.edge_box, e, inv))
+                nb.ext[1] = max(nb.ext[1], extent(nb.edge_box, e))
+
+
+@njit(**BORROWED)
+def _drop_pt(c: Contact, npt: int, now: int) -> int:
+    # the stored point-triangle pairs the round's points belong to taken out, the others kept in order
+    nb = c.near
+    kept = 0
+    for k in range(npt):
+        if nb.mark[1, c.pt[0, k]] == now or nb.tri_mark[c.pt[1, k]] == now:
+            continue
+        if kept != k:
+            for r in range(2):
+                c.pt[r, kept] = c.pt[r, k]
+            for r in range(6):
+                c.ptf[r, kept] = c.ptf[r, k]
+        kept += 1
+    return kept
+
+
+@njit(**BORROWED)
+def _drop_ee(c: Contact, nee: int, now: int) -> int:
+    # (as _drop_pt, for the edge-edge pairs)
+    nb = c.near
+    kept = 0
+    for k in range(nee):
+        if nb.edge_mark[c.ee[0, k]] == now or nb.edge_mark[c.ee[1, k]] == now:
+            continue
+        if kept != k:
+            for r in range(2):
+                c.ee[r, kept] = c.ee[r, k]
+            for r in range(5):
+                c.eef[r, kept] = c.eef[r, k]
+        kept += 1
+    return kept
+
+
+@njit(inline="always", **EXACT)
+def _inside(box: np.ndarray, e: int, x: float, y: float, z: float) -> bool:
+    return box[0, e] <= x <= box[3, e] and box[1, e] <= y <= box[4, e] and box[2, e] <= z <= box[5, e]
+
+
+@njit(inline="always", **EXACT)
+def _overlap(box: np.ndarray, a: int, b: int) -> bool:
+    return not (box[0, b] > box[3, a] or box[3, b] < box[0, a] or box[1, b] > box[4, a] or box[4, b] < box[1, a]
+                or box[2, b] > box[5, a] or box[5, b] < box[2, a])
+
+
+@njit(**BORROWED)
+def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: int, nee: int) -> tuple[int, int]:
+    # every pair the round's points (todo[lo:hi]) belong to, with the boxes and the exact tests
+    # of a rebuild: each moved point against the triangles whose box holds it; each triangle a
+    # moved point belongs to against the points in its box that did not move; each edge a moved
+    # point belongs to against the edges whose boxes overlap its own (a pair of two such edges
+    # once). The elements are found by their boxes' lower corners (see nearby.py), each once.
+    nb = c.near
+    x = c.ref
+    hits = nb.hits
+    cell = nb.cell
+    end_pt = c.pt.shape[1]
+    end_ee = c.ee.shape[1]
+    tbox = nb.tri_box
+    ebox = nb.edge_box
+    text = nb.ext[0]
+    eext = nb.ext[1]
+    for i in range(lo, hi):
+        p = nb.todo[i]
+        px, py, pz = x[0, p], x[1, p], x[2, p]
+        found = listed_in(nb.tris, hits, cell, px - text, py - text, pz - text, px, py, pz)
+        for j in range(found):
+            t = hits[j]
+            if _inside(tbox, t, px, py, pz):
+                npt = _point_triangle(x, c, p, t, dmin, npt, end_pt)
+    for i in range(lo, hi):
+        p = nb.todo[i]
+        for j in range(nb.tri_at[p], nb.tri_at[p + 1]):
+            t = nb.tri_ids[j]
+            if nb.tri_mark[t] != now:
+                continue
+            nb.tri_mark[t] = -now  # (tested once)
+            found = listed_in(nb.points, hits, cell, tbox[0, t], tbox[1, t], tbox[2, t], tbox[3, t], tbox[4, t],
+                              tbox[5, t])
+            for jj in range(found):
+                q = hits[jj]
+                if nb.mark[1, q] != now and _inside(tbox, t, x[0, q], x[1, q], x[2, q]):
+                    npt = _point_triangle(x, c, q, t, dmin, npt, end_pt)
+    for i in range(lo, hi):
+        p = nb.todo[i]
+        for j in range(nb.edge_at[p], nb.edge_at[p + 1]):
+            e = nb.edge_ids[j]
+            if nb.edge_mark[e] != now:
+                continue
+            nb.edge_mark[e] = -now  # (tested once)
+            found = listed_in(nb.edges, hits, cell, ebox[0, e] - eext, ebox[1, e] - eext, ebox[2, e] - eext,
+                              ebox[3, e], ebox[4, e], ebox[5, e])
+            for jj in range(found):
+                e2 = hits[jj]
+                if e2 == e or (abs(nb.edge_mark[e2]) == now and e2 < e) or not _overlap(ebox, e, e2):
+                    continue
+                nee = _edge_edge(x, c, min(e, e2), max(e, e2), dmin, nee, end_ee)
+    return npt, nee
+
+
+@njit(**BORROWED)
+def _round_balls(last: np.ndarray, c: Contact, lo: int, hi: int, now: int, moving: int, dmin: np.ndarray) -> int:
+    # the round's points' new balls; every other point's ball shrunk to a nearer new pair, and a
+    # point not yet moved whose start is then outside its ball put on the list for the next round
+    # (one that only its position after the integrator has left is clamped by the bound, and
+    # moved in the next substep: moving it now too moved many more points, at twice the cost on
+    # the folding 100 x 100 cloth); returns the list's new length
+    nb = c.near
+    floor = FLOOR * c.thickness
+    for i in range(lo, hi):
+        p = nb.todo[i]
+        r = GAMMA * max(dmin[p] - floor, 0.0)
+        c.rho2[p] = r * r
+    k = hi
+    for q in range(dmin.shape[0]):
+        if nb.mark[1, q] == now:
+            continue
+        r = GAMMA * max(dmin[q] - floor, 0.0)
+        if r * r < c.rho2[q]:
+            c.rho2[q] = r * r
+            if nb.mark[0, q] != moving and _leaves(last, c, q, 0.0):
+                nb.todo[k] = q
+                nb.mark[0, q] = moving
+                k += 1
+    return k
 
 
 # ------------------------------------------------------------------------------------------------
@@ -1028,14 +1293,16 @@ def bound(pos: np.ndarray, c: Contact) -> None:
             pos[0, p] = ref[0, p] + dx * f
             pos[1, p] = ref[1, p] + dy * f
             pos[2, p] = ref[2, p] + dz * f
+            c.near.held[p] = True
             c.meta[CLAMPED] = 1
 
 
 @njit(**KERNEL)
 def _stale(pos: np.ndarray, last: np.ndarray, c: Contact) -> bool:
-    """True when the substep that started at ``last`` needs a new reference: there is none, or a
-    point has left its ball (see the module's docstring, step 1)."""
-    return c.meta[VALID] == 0 or _outside(last, c) or _leaving(pos, c)
+    """True when the substep that started at ``last`` needs a whole new reference: there is none,
+    a point has left its ball, or more than ``LOCAL_SHARE`` of the points are about to (fewer have
+    their references moved one by one: :func:`rereference`)."""
+    return c.meta[VALID] == 0 or _outside(last, c) or _leaving(pos, c, np.int64(LOCAL_SHARE * pos.shape[1]))
 
 
 @njit(**KERNEL)
@@ -1112,9 +1379,12 @@ def _search_alone(x: np.ndarray, c: Contact, flag: np.ndarray) -> None:
 @njit(**EXACT)
 def contact_joined(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray) -> None:
     """The first member's end of the first half: the rebuild's parts joined (when ``flag`` says
-    it is stale), then the response."""
+    it is stale), or else the references of the points about to leave their balls moved, then
+    the response."""
     if flag[STALE] != 0:
         join(last, c, flag[CUT], flag[SIZE])
+        _rebuilt(pos, c)
+    elif rereference(pos, last, c):
         _rebuilt(pos, c)
     respond(pos, last, c)
 
@@ -1139,15 +1409,22 @@ def contact_bound(pos: np.ndarray, c: Contact) -> None:
 
 def snapshot_reference(c: Contact) -> tuple:
     """A copy of what the pass carries from one substep to the next (the reference, the balls,
-    the stored pairs, the counters), for :func:`restore_reference`."""
+    the stored pairs, the counters, the points' cells, the points held), for
+    :func:`restore_reference`."""
     npt, nee = int(c.meta[N_PT]), int(c.meta[N_EE])
+    nb = c.near
+    kept = (nb.tri_box, nb.edge_box, nb.ext, nb.held, *(a for cells in (nb.points, nb.tris, nb.edges) for a in cells[:3]))
     return (c.ref.copy(), c.rho2.copy(), c.pt[:, :npt].copy(), c.ptf[:, :npt].copy(), c.ee[:, :nee].copy(),
-            c.eef[:, :nee].copy(), c.meta.copy())
+            c.eef[:, :nee].copy(), c.meta.copy(), tuple(a.copy() for a in kept))
 
 
 def restore_reference(c: Contact, saved: tuple) -> None:
     """Put back a :func:`snapshot_reference` (a frame replayed from its start)."""
-    ref, rho2, pt, ptf, ee, eef, meta = saved
+    ref, rho2, pt, ptf, ee, eef, meta, kept = saved
+    nb = c.near
+    for a, b in zip((nb.tri_box, nb.edge_box, nb.ext, nb.held,
+                     *(a for cells in (nb.points, nb.tris, nb.edges) for a in cells[:3])), kept):
+        a[...] = b
     c.ref[...] = ref
     c.rho2[...] = rho2
     c.pt[:, :pt.shape[1]] = pt
