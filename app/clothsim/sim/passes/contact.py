@@ -1061,6 +1061,18 @@ def _drop_ee(c: Contact, nee: int, now: int) -> int:
     return kept
 
 
+@njit(**BORROWED)
+def _one_pt(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray, npt: int, end: int) -> int:
+    # (the exact tests compiled once here and called, not inlined at each place that tests a pair:
+    # inlined three times, they made the moves' search the longest compile of a cold start)
+    return _point_triangle(x, c, p, t, dmin, npt, end)
+
+
+@njit(**BORROWED)
+def _one_ee(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, nee: int, end: int) -> int:
+    return _edge_edge(x, c, e1, e2, dmin, nee, end)
+
+
 @njit(inline="always", **EXACT)
 def _inside(box: np.ndarray, e: int, x: float, y: float, z: float) -> bool:
     return box[0, e] <= x <= box[3, e] and box[1, e] <= y <= box[4, e] and box[2, e] <= z <= box[5, e]
@@ -1096,7 +1108,7 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
         for j in range(found):
             t = hits[j]
             if _inside(tbox, t, px, py, pz):
-                npt = _point_triangle(x, c, p, t, dmin, npt, end_pt)
+                npt = _one_pt(x, c, p, t, dmin, npt, end_pt)
     for i in range(lo, hi):
         p = nb.todo[i]
         for j in range(nb.tri_at[p], nb.tri_at[p + 1]):
@@ -1109,7 +1121,7 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
             for jj in range(found):
                 q = hits[jj]
                 if nb.mark[1, q] != now and _inside(tbox, t, x[0, q], x[1, q], x[2, q]):
-                    npt = _point_triangle(x, c, q, t, dmin, npt, end_pt)
+                    npt = _one_pt(x, c, q, t, dmin, npt, end_pt)
     for i in range(lo, hi):
         p = nb.todo[i]
         for j in range(nb.edge_at[p], nb.edge_at[p + 1]):
@@ -1123,7 +1135,7 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
                 e2 = hits[jj]
                 if e2 == e or (abs(nb.edge_mark[e2]) == now and e2 < e) or not _overlap(ebox, e, e2):
                     continue
-                nee = _edge_edge(x, c, min(e, e2), max(e, e2), dmin, nee, end_ee)
+                nee = _one_ee(x, c, min(e, e2), max(e, e2), dmin, nee, end_ee)
     return npt, nee
 
 

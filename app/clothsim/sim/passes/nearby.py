@@ -127,7 +127,7 @@ def list_all(cells: Cells, keys: np.ndarray, m: int) -> None:
         cells.head[s] = i
 
 
-@njit(inline="always", **KERNEL)
+@njit(**BORROWED)
 def relist(cells: Cells, i: int, key: np.int64) -> None:
     """Item ``i`` into the list of cell ``key``."""
     if key == cells.key[i]:
@@ -147,7 +147,7 @@ def relist(cells: Cells, i: int, key: np.int64) -> None:
     cells.head[s] = i
 
 
-@njit(inline="always", **KERNEL)
+@njit(**BORROWED)
 def listed_in(cells: Cells, out: np.ndarray, cell: float, lox: float, loy: float, loz: float, hix: float,
               hiy: float, hiz: float) -> int:
     """The items listed in the cells from the one holding (lo) to the one holding (hi), into
