@@ -222,16 +222,7 @@ def _every_pair(x: np.ndarray, c) -> np.ndarray:  # noqa: ANN001
     """The reference by brute force: every point-triangle and edge-edge pair tested, in order, in
     IEEE order (as the rebuild's tests are compiled)."""
     dmin = np.full(x.shape[1], c.radius)
-    npt = 0
-    for p in range(x.shape[1]):
-        for t in range(c.tris.shape[1]):
-            npt = _point_triangle(x, c, p, t, dmin, npt, c.pt.shape[1])
-    nee = 0
-    for e1 in range(c.edges.shape[1]):
-        for e2 in range(e1 + 1, c.edges.shape[1]):
-            nee = _edge_edge(x, c, e1, e2, dmin, nee, c.ee.shape[1])
-    c.meta[1] = npt
-    c.meta[2] = nee
+    _every_pair_into(x, c, dmin)
     return dmin
 
 
@@ -443,17 +434,10 @@ def test_the_response_sweeps_while_pins_move() -> None:
     assert tracked._kernel_args.contact.meta[MOVING] == 1
 
 
-@njit(**EXACT)
-def _every_pair_compiled(x: np.ndarray, c) -> np.ndarray:  # noqa: ANN001
-    # (_every_pair, compiled: the test below checks many states)
-    dmin = np.full(x.shape[1], c.radius)
-    _every_pair_into(x, c, dmin)
-    return dmin
-
-
 @njit(**BORROWED)
 def _every_pair_into(x: np.ndarray, c, dmin: np.ndarray) -> None:  # noqa: ANN001
-    # (without reference counting: it would count the group's arrays up and down at every pair)
+    # (_every_pair's tests, compiled, without reference counting: it would count the group's
+    # arrays up and down at every pair)
     npt = 0
     for p in range(x.shape[1]):
         for t in range(c.tris.shape[1]):
@@ -489,7 +473,7 @@ def test_the_references_moved_point_by_point_hold_what_a_rebuild_from_them_would
         nonlocal checked, in_contact
         x = c.ref.copy()
         want = contact_group(x, c.tris, c.movable, sim.scene.cloth.thickness)
-        dmin = _every_pair_compiled(x, want)
+        dmin = _every_pair(x, want)
         for ids, k, width, wants, wk in ((c.pt, int(c.meta[1]), c.tris.shape[1], want.pt, int(want.meta[1])),
                                          (c.ee, int(c.meta[2]), c.edges.shape[1], want.ee, int(want.meta[2]))):
             got = np.sort(ids[0, :k] * width + ids[1, :k])

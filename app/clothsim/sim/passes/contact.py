@@ -638,18 +638,9 @@ def _settle_pt(c: Contact, pairs: np.ndarray, out: np.ndarray, n: int, dmin: np.
 def _element_boxes(x: np.ndarray, ids: np.ndarray, pad: float) -> np.ndarray:
     """(6, K) boxes (lo, hi) of the elements whose corners are the columns of ``ids`` (k, K),
     widened by ``pad``."""
-    m = ids.shape[1]
-    box = np.empty((6, m))
-    for ax in range(3):
-        for e in range(m):
-            lo = x[ax, ids[0, e]]
-            hi = lo
-            for k in range(1, ids.shape[0]):
-                v = x[ax, ids[k, e]]
-                lo = min(lo, v)
-                hi = max(hi, v)
-            box[ax, e] = lo - pad
-            box[3 + ax, e] = hi + pad
+    box = np.empty((6, ids.shape[1]))
+    for e in range(ids.shape[1]):
+        element_box(x, ids, e, pad, box)
     return box
 
 
@@ -1033,14 +1024,8 @@ def _drop_pt(c: Contact, npt: int, now: int) -> int:
     nb = c.near
     kept = 0
     for k in range(npt):
-        if nb.mark[1, c.pt[0, k]] == now or nb.tri_mark[c.pt[1, k]] == now:
-            continue
-        if kept != k:
-            for r in range(2):
-                c.pt[r, kept] = c.pt[r, k]
-            for r in range(6):
-                c.ptf[r, kept] = c.ptf[r, k]
-        kept += 1
+        if nb.mark[1, c.pt[0, k]] != now and nb.tri_mark[c.pt[1, k]] != now:
+            kept = _keep(c.pt, c.ptf, k, kept)
     return kept
 
 
@@ -1050,15 +1035,20 @@ def _drop_ee(c: Contact, nee: int, now: int) -> int:
     nb = c.near
     kept = 0
     for k in range(nee):
-        if nb.edge_mark[c.ee[0, k]] == now or nb.edge_mark[c.ee[1, k]] == now:
-            continue
-        if kept != k:
-            for r in range(2):
-                c.ee[r, kept] = c.ee[r, k]
-            for r in range(5):
-                c.eef[r, kept] = c.eef[r, k]
-        kept += 1
+        if nb.edge_mark[c.ee[0, k]] != now and nb.edge_mark[c.ee[1, k]] != now:
+            kept = _keep(c.ee, c.eef, k, kept)
     return kept
+
+
+@njit(inline="always", **EXACT)
+def _keep(ids: np.ndarray, data: np.ndarray, k: int, kept: int) -> int:
+    # stored pair k moved to column kept (the pairs before it that stay); returns kept + 1
+    if kept != k:
+        for r in range(ids.shape[0]):
+            ids[r, kept] = ids[r, k]
+        for r in range(data.shape[0]):
+            data[r, kept] = data[r, k]
+    return kept + 1
 
 
 @njit(**BORROWED)
