@@ -90,9 +90,10 @@ PARTS = 32
 
 #: A member's flag, an int64 row of FLAG: whether the substep rebuilds the reference, the member's
 #: first part and end part, the team's size (the rows of ``dmins`` written), the parts the
-#: rebuild is cut into.
-STALE, FIRST, END, SIZE, CUT = range(5)
-FLAG = 5
+#: rebuild is cut into, and whether any point calls for a new reference (so that a substep in
+#: which none does skips :func:`rereference`'s own pass over the points).
+STALE, FIRST, END, SIZE, CUT, CALLS = range(6)
+FLAG = 6
 
 #: A substep whose points about to leave their balls are more than this fraction of the cloth
 #: rebuilds the whole reference (one search of the cloth, shared by the team) instead of moving
@@ -891,17 +892,17 @@ def _leaves(x: np.ndarray, c: Contact, p: int, roomy: float) -> bool:
 
 
 @njit(**KERNEL)
-def _leaving(x: np.ndarray, c: Contact, most: int) -> bool:
-    """True when more than ``most`` points of ``x`` call for a new reference: they are
-    :func:`_leaves`, or the bound has held them back since their reference was set."""
+def _leaving(x: np.ndarray, c: Contact, most: int) -> int:
+    """How many points of ``x`` call for a new reference (they are :func:`_leaves`, or the bound has
+    held them back since their reference was set), counted up to ``most`` + 1."""
     roomy = (ROOMY * GAMMA * c.radius) ** 2
     count = 0
     for p in range(x.shape[1]):
         if c.near.held[p] or _leaves(x, c, p, roomy):
             count += 1
             if count > most:
-                return True
-    return False
+                break
+    return count
 
 
 @njit(**KERNEL)
@@ -1300,11 +1301,16 @@ def bound(pos: np.ndarray, c: Contact) -> None:
 
 
 @njit(**KERNEL)
-def _stale(pos: np.ndarray, last: np.ndarray, c: Contact) -> bool:
+def _stale(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray) -> bool:
     """True when the substep that started at ``last`` needs a whole new reference: there is none,
     a point has left its ball, or more than ``LOCAL_SHARE`` of the points are about to (fewer have
-    their references moved one by one: :func:`rereference`)."""
-    return c.meta[VALID] == 0 or _outside(last, c) or _leaving(pos, c, np.int64(LOCAL_SHARE * pos.shape[1]))
+    their references moved one by one: :func:`rereference`; how many call for one goes in
+    ``flag[CALLS]``)."""
+    if c.meta[VALID] == 0 or _outside(last, c):
+        return True
+    most = np.int64(LOCAL_SHARE * pos.shape[1])
+    flag[CALLS] = _leaving(pos, c, most)
+    return flag[CALLS] > most
 
 
 @njit(**KERNEL)
@@ -1353,7 +1359,8 @@ def _first_part(cost: np.ndarray, member: int, size: int) -> int:
 def contact_stale(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray, member: int, size: int) -> None:
     """Member ``member``'s ``flag``: whether the substep that started at ``last`` rebuilds the
     reference, and if so its parts of the rebuild."""
-    flag[STALE] = 1 if _stale(pos, last, c) else 0
+    flag[CALLS] = 0
+    flag[STALE] = 1 if _stale(pos, last, c, flag) else 0
     if flag[STALE] != 0:
         flag[FIRST] = _first_part(c.cost, member, size)
         flag[END] = _first_part(c.cost, member + 1, size) if member + 1 < size else PARTS
@@ -1386,7 +1393,7 @@ def contact_joined(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarr
     if flag[STALE] != 0:
         join(last, c, flag[CUT], flag[SIZE])
         _rebuilt(pos, c)
-    elif rereference(pos, last, c):
+    elif flag[CALLS] != 0 and rereference(pos, last, c):
         _rebuilt(pos, c)
     respond(pos, last, c)
 
