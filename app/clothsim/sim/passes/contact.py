@@ -29,10 +29,11 @@ distance d each move less than d/2. In each substep:
    is outside too. Pinned points are never moved; their balls are
    checked in step 1 like every other point's.
 
-The broad phase is a uniform grid of hashed cells, built at a rebuild only (:func:`rebuild` has
-the rule): the triangles' boxes, widened by the query radius, in every cell they overlap, read by
-each point in its own cell; each edge's box, widened by half of it, once in the cell of its lower
-corner, read by the other edges from the cells where an overlapping box can start. A rebuild is
+The broad phase is a dense grid of cells over the cloth's extent (:mod:`.celltables`), built at
+a rebuild only (:func:`rebuild` has the rule): the triangles' boxes, widened by the query radius,
+in every cell they overlap, read by each point in its own cell; each edge's box, widened by half
+of it, once in the cell of its lower corner, read by the other edges from the cells where an
+overlapping box can start (cells of half the largest box, a column of them one run). A rebuild is
 cut into ``PARTS`` parts, ranges of the points and of the edges (:func:`search`), which the thread
 team's members search side by side; the first member joins them in order (:func:`join`), so the
 pairs and balls are one sweep's whoever searched what. Moving a few points' references finds
@@ -49,9 +50,8 @@ from numba import njit
 
 from ...jit import BORROWED, CHUNKS, EXACT, KERNEL
 from ..team import share
-from .nearby import Cells, Nearby, box_key, cell_of, element_box, extent, key_of, list_all, listed_in, nearby_index, \
-    relist, slot_of
-from .selfcollide import _cell_key
+from .celltables import box_table, cell_at, corner_table, grid_over, index_of
+from .nearby import Cells, Nearby, box_key, element_box, extent, key_of, list_all, listed_in, nearby_index, relist
 
 #: Fraction of the distance to the nearest other element a point may move from its reference.
 GAMMA = 0.45
@@ -253,118 +253,6 @@ def closest_on_segments(p1x: float, p1y: float, p1z: float, q1x: float, q1y: flo
 # broad phase
 
 
-@njit(inline="always", **KERNEL)
-def _table_size(entries: int) -> np.int64:
-    """Slots for a table of ``entries``: a power of two at least twice as many, and at least 2."""
-    table = np.int64(2)
-    while table < 2 * entries:
-        table *= 2
-    return table
-
-
-@njit(inline="always", **KERNEL)
-def _shift_of(table: int) -> np.uint64:
-    """The shift that takes a power-of-two ``table``'s bits off the top of a 64-bit hash."""
-    bits = 0
-    while (np.int64(1) << bits) < table:
-        bits += 1
-    return np.uint64(64 - bits)
-
-
-@njit(inline="always", **KERNEL)
-def _slot_ends(start: np.ndarray, table: int) -> None:
-    """Each slot's count in ``start`` (table + 1,) made the end of its run of entries (the last
-    entry too)."""
-    acc = start[0]
-    for s in range(1, table):
-        acc += start[s]
-        start[s] = acc
-    start[table] = acc
-
-
-@njit(**KERNEL)
-def cell_table(box: np.ndarray, cell: float) -> tuple:
-    """Every box in every cell it overlaps, counting-sorted by hash slot: (start (table + 1,),
-    element id, cell key), both in slot order."""
-    m = box.shape[1]
-    inv = 1.0 / cell
-    total = 0
-    for k in range(m):
-        nx = cell_of(box[3, k], inv) - cell_of(box[0, k], inv) + 1
-        ny = cell_of(box[4, k], inv) - cell_of(box[1, k], inv) + 1
-        nz = cell_of(box[5, k], inv) - cell_of(box[2, k], inv) + 1
-        total += nx * ny * nz
-    table = _table_size(total)
-    shift = _shift_of(table)
-    keys = np.empty(total, dtype=np.int64)
-    ids = np.empty(total, dtype=np.int64)
-    start = np.zeros(table + 1, dtype=np.int64)
-    i = 0
-    for k in range(m):
-        x0, x1 = cell_of(box[0, k], inv), cell_of(box[3, k], inv)
-        y0, y1 = cell_of(box[1, k], inv), cell_of(box[4, k], inv)
-        z0, z1 = cell_of(box[2, k], inv), cell_of(box[5, k], inv)
-        for ix in range(x0, x1 + 1):
-            for iy in range(y0, y1 + 1):
-                for iz in range(z0, z1 + 1):
-                    key = _cell_key(ix, iy, iz)
-                    keys[i] = key
-                    ids[i] = k
-                    start[slot_of(key, shift)] += 1
-                    i += 1
-    _slot_ends(start, table)
-    skeys = np.empty(total, dtype=np.int64)
-    sids = np.empty(total, dtype=np.int64)
-    # (placed from the last entry back, each slot filled from its end: a slot's entries keep
-    # their order, and start ends up at each slot's first, with no copy of the starts as cursors,
-    # which cost several times the placing itself: docs/self-collision.md, Cost)
-    for j in range(total - 1, -1, -1):
-        s = slot_of(keys[j], shift)
-        start[s] -= 1
-        skeys[start[s]] = keys[j]
-        sids[start[s]] = ids[j]
-    return start, sids, skeys
-
-
-@njit(**KERNEL)
-def corner_table(box: np.ndarray, cell: float) -> tuple:
-    """Every box once, in the cell of its lower corner, counting-sorted by hash slot: (start
-    (table + 1,), element id, cell key), both in slot order. With cells no smaller than any box,
-    the boxes that overlap box b have their lower corner in the cells from b's lower corner's
-    minus one to its upper corner's, along each axis."""
-    m = box.shape[1]
-    inv = 1.0 / cell
-    table = _table_size(m)
-    shift = _shift_of(table)
-    keys = np.empty(m, dtype=np.int64)
-    start = np.zeros(table + 1, dtype=np.int64)
-    for k in range(m):
-        key = _cell_key(cell_of(box[0, k], inv), cell_of(box[1, k], inv), cell_of(box[2, k], inv))
-        keys[k] = key
-        start[slot_of(key, shift)] += 1
-    _slot_ends(start, table)
-    skeys = np.empty(m, dtype=np.int64)
-    sids = np.empty(m, dtype=np.int64)
-    for k in range(m - 1, -1, -1):  # (as in cell_table)
-        s = slot_of(keys[k], shift)
-        start[s] -= 1
-        skeys[start[s]] = keys[k]
-        sids[start[s]] = k
-    return start, sids, skeys
-
-
-@njit(inline="always", **KERNEL)
-def _after(ids: np.ndarray, lo: int, hi: int, e: int) -> int:
-    """The first index in [lo, hi) of increasing ``ids`` whose id is greater than ``e``."""
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if ids[mid] <= e:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
 # ------------------------------------------------------------------------------------------------
 # the reference state
 
@@ -465,6 +353,12 @@ def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, ne
 BATCH = 256
 #: What a pair's test costs a rebuild, in entries of a cell read (for sharing the parts out).
 TEST_COST = 4
+#: A rebuild's grids have at most this many cells per element (plus 64), their cells made larger
+#: where the cloth spreads wider (:func:`~.celltables.grid_over`).
+GRID_CELLS = 8
+#: The edges' cells are this fraction of the largest edge box: finer cells read fewer entries an
+#: edge but more columns of cells.
+EDGE_SPLIT = 2.0
 # (the member and team size the serial path calls with, typed int64: a literal argument would have
 # the callees compiled once more for its literal type)
 _ZERO, _ONE = np.int64(0), np.int64(1)
@@ -656,8 +550,9 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
     Point-triangle: the triangles' boxes, widened by the radius, go into every cell they overlap;
     each point reads its own cell (a triangle is listed once per cell: no pair twice). Edge-edge:
     each edge's box, widened by half the radius, goes once into the cell of its lower corner
-    (cells at least as large as every box); each edge reads the cells where an overlapping box
-    can have its lower corner and tests the later edges found there. The pairs found are tested
+    (cells ``1 / EDGE_SPLIT`` of the largest box); each edge reads the cells where an overlapping
+    box can have its lower corner (from its own lower corner less the largest box to its upper
+    corner) and tests the later edges found there. The pairs found are tested
     ``BATCH`` at a time (:func:`_triangles_batch`, :func:`_segments_batch`), with the bits of
     :func:`_point_triangle` and :func:`_edge_edge`, and taken in the order found. A part's points
     and edges are a contiguous range, so the parts' pairs, one part after another, are the pairs
@@ -665,24 +560,36 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
     """
     n = x.shape[1]
     radius = c.radius
-    inv = 1.0 / c.cell
     tris = c.tris
     edges = c.edges
     xin = np.empty(12 * BATCH)
     out = np.empty(7 * BATCH)
     pairs = np.empty(2 * BATCH, dtype=np.int64)
+    hit = np.empty(max(c.tris.shape[1], c.edges.shape[1]), dtype=np.int64)
     # the tables, once for the parts this call runs
     tbox = _element_boxes(x, c.tris, radius)
-    start, ids, keys = cell_table(tbox, c.cell)
-    shift = _shift_of(start.shape[0] - 1)
+    grid, tcell = grid_over(tbox, c.cell, GRID_CELLS * tbox.shape[1] + 64)
+    start, ids = box_table(tbox, grid, tcell)
+    inv = 1.0 / tcell
     ebox = _element_boxes(x, c.edges, 0.5 * radius)
     ne = ebox.shape[1]
-    ecell = c.cell
+    eext = 0.0
     for e in range(ne):
-        ecell = max(ecell, ebox[3, e] - ebox[0, e], ebox[4, e] - ebox[1, e], ebox[5, e] - ebox[2, e])
+        eext = max(eext, ebox[3, e] - ebox[0, e], ebox[4, e] - ebox[1, e], ebox[5, e] - ebox[2, e])
+    egrid, ecell = grid_over(ebox, max(eext / EDGE_SPLIT, 1e-300), GRID_CELLS * ne + 64)
+    estart, eids = corner_table(ebox, egrid, ecell)
     einv = 1.0 / ecell
-    estart, eids, ekeys = corner_table(ebox, ecell)
-    eshift = _shift_of(estart.shape[0] - 1)
+    # (each entry's box beside it, in the table's order: a run's boxes read as one stream, where
+    # the boxes by edge cost six scattered reads an entry)
+    sbox = np.empty((ne, 6))
+    for i in range(ne):
+        for k in range(6):
+            sbox[i, k] = ebox[k, eids[i]]
+    # (the same for the triangles' boxes, by triangle: one line of memory a box)
+    tb = np.empty((tbox.shape[1], 6))
+    for t in range(tbox.shape[1]):
+        for k in range(6):
+            tb[t, k] = tbox[k, t]
     dmin = c.dmins[row]
     for p in range(n):
         dmin[p] = radius
@@ -695,16 +602,18 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
         p0, p1 = share(n, part, parts)
         cost = np.int64(0)
         for p in range(p0, p1):
-            key = _cell_key(cell_of(x[0, p], inv), cell_of(x[1, p], inv), cell_of(x[2, p], inv))
-            s = slot_of(key, shift)
+            s = index_of(grid, cell_at(grid, 0, x[0, p], inv), cell_at(grid, 1, x[1, p], inv),
+                         cell_at(grid, 2, x[2, p], inv))
             cost += start[s + 1] - start[s]
-            for i in range(start[s], start[s + 1]):
-                if keys[i] != key:
-                    continue
+            px, py, pz = x[0, p], x[1, p], x[2, p]
+            m = np.int64(0)
+            for i in range(start[s], start[s + 1]):  # (as the edges' below)
                 t = ids[i]
-                if (x[0, p] < tbox[0, t] or x[0, p] > tbox[3, t] or x[1, p] < tbox[1, t] or x[1, p] > tbox[4, t]
-                        or x[2, p] < tbox[2, t] or x[2, p] > tbox[5, t]):
-                    continue
+                hit[m] = t
+                m += ((px >= tb[t, 0]) & (px <= tb[t, 3]) & (py >= tb[t, 1]) & (py <= tb[t, 4]) & (pz >= tb[t, 2])
+                      & (pz <= tb[t, 5]))
+            for j in range(m):
+                t = hit[j]
                 a, b, cc = tris[0, t], tris[1, t], tris[2, t]
                 if p == a or p == b or p == cc:
                     continue
@@ -717,42 +626,43 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
         if nb > 0:
             _triangles_batch(xin, out, nb)
             npt = _settle_pt(c, pairs, out, nb, dmin, npt, pt_end)
-        # edge-edge: each edge once, in its lower corner's cell (cells as large as the largest box)
+        # edge-edge: each edge once, in its lower corner's cell (cells as large as the largest box);
+        # the cells an overlapping box can start in read column by column, each one run
         ee_first, ee_end = share(c.ee.shape[1], part, parts)
         nee = ee_first
         nb = np.int64(0)
         f0, f1 = share(ne, part, parts)
         for e1 in range(f0, f1):
-            x0, x1 = cell_of(ebox[0, e1], einv) - 1, cell_of(ebox[3, e1], einv)
-            y0, y1 = cell_of(ebox[1, e1], einv) - 1, cell_of(ebox[4, e1], einv)
-            z0, z1 = cell_of(ebox[2, e1], einv) - 1, cell_of(ebox[5, e1], einv)
+            x0, x1 = cell_at(egrid, 0, ebox[0, e1] - eext, einv), cell_at(egrid, 0, ebox[3, e1], einv)
+            y0, y1 = cell_at(egrid, 1, ebox[1, e1] - eext, einv), cell_at(egrid, 1, ebox[4, e1], einv)
+            z0, z1 = cell_at(egrid, 2, ebox[2, e1] - eext, einv), cell_at(egrid, 2, ebox[5, e1], einv)
+            lx, ly, lz, hx, hy, hz = ebox[0, e1], ebox[1, e1], ebox[2, e1], ebox[3, e1], ebox[4, e1], ebox[5, e1]
+            # (the entries tested without branches and the ones that pass gathered in order: a test
+            # that one entry in seven passes is a branch the processor guesses wrong)
+            m = np.int64(0)
             for ix in range(x0, x1 + 1):
                 for iy in range(y0, y1 + 1):
-                    for iz in range(z0, z1 + 1):
-                        key = _cell_key(ix, iy, iz)
-                        s = slot_of(key, eshift)
-                        # a slot lists its edges in increasing order: start past e1 (only later edges
-                        # are tested, each pair once), in the order the whole slot would be read
-                        first = _after(eids, estart[s], estart[s + 1], e1)
-                        cost += estart[s + 1] - first + 1
-                        for i in range(first, estart[s + 1]):
-                            e2 = eids[i]
-                            if ekeys[i] != key:
-                                continue
-                            if (ebox[0, e2] > ebox[3, e1] or ebox[3, e2] < ebox[0, e1] or ebox[1, e2] > ebox[4, e1]
-                                    or ebox[4, e2] < ebox[1, e1] or ebox[2, e2] > ebox[5, e1]
-                                    or ebox[5, e2] < ebox[2, e1]):
-                                continue
-                            p1, q1 = edges[0, e1], edges[1, e1]
-                            p2, q2 = edges[0, e2], edges[1, e2]
-                            if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
-                                continue
-                            nb = _add_pair(xin, pairs, nb, x, p1, q1, p2, q2, e1, e2)
-                            cost += TEST_COST
-                            if nb == BATCH:
-                                _segments_batch(xin, out, nb)
-                                nee = _settle_ee(x, c, pairs, out, nb, dmin, nee, ee_end)
-                                nb = 0
+                    r0 = estart[index_of(egrid, ix, iy, z0)]
+                    r1 = estart[index_of(egrid, ix, iy, z1) + 1]
+                    cost += r1 - r0 + 1
+                    for i in range(r0, r1):
+                        e2 = eids[i]
+                        # (only later edges: each pair once)
+                        hit[m] = e2
+                        m += ((e2 > e1) & (sbox[i, 0] <= hx) & (sbox[i, 3] >= lx) & (sbox[i, 1] <= hy)
+                              & (sbox[i, 4] >= ly) & (sbox[i, 2] <= hz) & (sbox[i, 5] >= lz))
+            p1, q1 = edges[0, e1], edges[1, e1]
+            for j in range(m):
+                e2 = hit[j]
+                p2, q2 = edges[0, e2], edges[1, e2]
+                if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
+                    continue
+                nb = _add_pair(xin, pairs, nb, x, p1, q1, p2, q2, e1, e2)
+                cost += TEST_COST
+                if nb == BATCH:
+                    _segments_batch(xin, out, nb)
+                    nee = _settle_ee(x, c, pairs, out, nb, dmin, nee, ee_end)
+                    nb = 0
         if nb > 0:
             _segments_batch(xin, out, nb)
             nee = _settle_ee(x, c, pairs, out, nb, dmin, nee, ee_end)
@@ -1168,13 +1078,16 @@ def _respond(pos: np.ndarray, last: np.ndarray, c: Contact, ids: np.ndarray, coe
     separation is sum coef_k x_k along n); pushes the pair apart towards ``h`` (``push`` of the
     overlap left) with friction."""
     s_now = 0.0
-    s_last = 0.0
     for k in range(4):
         q = ids[k]
         s_now += coef[k] * (pos[0, q] * nx + pos[1, q] * ny + pos[2, q] * nz)
-        s_last += coef[k] * (last[0, q] * nx + last[1, q] * ny + last[2, q] * nz)
     if s_now >= h:
         return
+    # (the start's separation only for a pair in contact: most stored pairs are not)
+    s_last = 0.0
+    for k in range(4):
+        q = ids[k]
+        s_last += coef[k] * (last[0, q] * nx + last[1, q] * ny + last[2, q] * nz)
     # inelastic: no closer than at the substep's start (or the contact distance), then part of
     # what overlap is left
     base = max(s_now, min(s_last, h))
