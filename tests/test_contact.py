@@ -37,6 +37,25 @@ def self_collision_scene(n: int = 22, integrator: str = "verlet", damping: str =
         .with_simulation(self_collision=mode, integrator=integrator, damping_mode=damping)
 
 
+def folded_cloth(frames: int = 70) -> Simulation:
+    """The 20 x 20 cloth folded on the floor: from frame ``frames`` on, the first frame from whose
+    positions a rebuild stores more than 10 point-triangle and 10 edge-edge pairs (which frame that
+    is depends on the contact mode's bits; the tests below need pairs of both kinds to check)."""
+    from clothsim.sim.passes.contact import contact_group, rebuild
+
+    sim = Simulation(self_collision_scene(20))
+    sim.step(frames)
+    for _ in range(60):
+        x = np.ascontiguousarray(sim.positions.T)
+        c = sim._kernel_args.contact
+        probe = contact_group(x, c.tris, c.movable, sim.scene.cloth.thickness)
+        rebuild(x, probe)
+        if probe.meta[1] > 10 and probe.meta[2] > 10:
+            return sim
+        sim.step(1)
+    raise AssertionError(f"the 20 x 20 cloth had no frame from {frames} to {frames + 59} with pairs of both kinds")
+
+
 def flag_scene(nw: int = 27, nh: int = 18, mode: str = "contact", pin_motion: dict | None = None):
     raw = {"cloth": {"width": 1.5, "height": 1.0, "num_width_points": nw, "num_height_points": nh, "thickness": 0.01,
                      "orientation": "vertical", "pinned": [[0, j] for j in range(nh)], "damping": 0.05,
@@ -233,8 +252,11 @@ def test_the_broad_phase_finds_every_pair_brute_force_finds(frames: int) -> None
     # every pair
     from clothsim.sim.passes.contact import FLOOR, GAMMA, contact_group, rebuild
 
-    sim = Simulation(self_collision_scene(20))
-    sim.step(frames)
+    if frames == 70:
+        sim = folded_cloth(frames)
+    else:
+        sim = Simulation(self_collision_scene(20))
+        sim.step(frames)
     x = np.ascontiguousarray(sim.positions.T)
     c = sim._kernel_args.contact
     rebuild(x, c)
@@ -260,8 +282,7 @@ def test_the_batched_tests_give_the_one_at_a_time_tests_bits() -> None:
     # weights and normal and every ball equal bit for bit to the scalar tests' in the same order
     from clothsim.sim.passes.contact import FLOOR, GAMMA, contact_group, rebuild
 
-    sim = Simulation(self_collision_scene(20))
-    sim.step(70)
+    sim = folded_cloth()
     x = np.ascontiguousarray(sim.positions.T)
     c = sim._kernel_args.contact
     rebuild(x, c)
@@ -333,6 +354,33 @@ def test_a_part_over_its_share_has_the_first_member_search_the_rebuild_again_in_
     assert fell_back > 0 and got._kernel_args.contact.meta[DROPPED] == 0
 
 
+def test_a_frame_that_finds_more_pairs_than_the_arrays_hold_is_run_again_with_longer_ones(monkeypatch) -> None:
+    # pair arrays of 8 columns: a frame whose rebuilds find more pairs is run again from its start
+    # with arrays twice as long, until none is dropped; the cloth moves as with arrays of the usual
+    # length, bit for bit, on the fast path and on another integrator's
+    from clothsim.sim import simulation as simulation_module
+    from clothsim.sim.passes.contact import DROPPED
+
+    usual = simulation_module.contact_group
+
+    def short(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        c = usual(*args, **kwargs)
+        return c._replace(pt=np.zeros((2, 8), np.int64), ptf=np.zeros((6, 8)), ee=np.zeros((2, 8), np.int64),
+                          eef=np.zeros((5, 8)))
+
+    for integrator in ("verlet", "xpbd"):
+        monkeypatch.setattr(simulation_module, "contact_group", usual)
+        want = Simulation(self_collision_scene(16, integrator=integrator))
+        monkeypatch.setattr(simulation_module, "contact_group", short)
+        got = Simulation(self_collision_scene(16, integrator=integrator))
+        for _ in range(55):
+            want.step(1)
+            got.step(1)
+            assert np.array_equal(got.positions, want.positions), integrator
+        c = got._kernel_args.contact
+        assert c.pt.shape[1] > 8 and c.meta[DROPPED] == 0 and want._kernel_args.contact.meta[DROPPED] == 0
+
+
 @pytest.mark.parametrize("room", ["shares", "all", "half"])
 def test_a_rebuild_searched_in_parts_by_the_team_stores_what_one_sweep_stores(room: str) -> None:
     # the team's members search their parts of a rebuild side by side and the first joins them:
@@ -342,8 +390,7 @@ def test_a_rebuild_searched_in_parts_by_the_team_stores_what_one_sweep_stores(ro
     # searched again as one part), or half the pairs (the rest dropped, as one sweep drops them)
     from clothsim.sim.passes.contact import join, search
 
-    sim = Simulation(self_collision_scene(20))
-    sim.step(70)
+    sim = folded_cloth()
     x = np.ascontiguousarray(sim.positions.T)
     c = sim._kernel_args.contact
     if room != "shares":

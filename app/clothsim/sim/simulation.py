@@ -22,11 +22,11 @@ from .passes.wind import triangles
 from ..jit import CHUNKS
 from ..jit.internals import packed_value
 from .passes.pins import move_pins
-from .passes.contact import MOVING
 from .passes.colliders.mesh import MeshGroup, collide_address
 from .passes.colliders.moving import top_speed
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
-from .passes.contact import contact_group, response_reach, restore_reference, snapshot_reference
+from .passes.contact import DROPPED, MOVING, contact_group, response_reach, restore_reference, snapshot_reference, \
+    with_more_room
 from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash
 
 #: The contact mode: a pass of its own (passes/contact.py), not a query of the hash.
@@ -514,11 +514,29 @@ class Simulation:
                  self._contact_snapshot())
         steps = self.scene.simulation.simulation_steps
         run(steps, saved)
+        while self._dropped_pairs(saved) and self._more_pair_room():
+            self._restore(saved)
+            run(steps, saved)
         if self._kernel_args.contact is not None:
             self._pins_seen[...] = self._pos[:, self._pins]
         if sim_blow_up_reason(self) is not None:
             self._report_blow_up(saved, steps)
         self.frame += 1
+
+    def _dropped_pairs(self, saved: tuple) -> bool:
+        # whether the frame just run found more contact pairs than the pair arrays hold
+        contact = self._kernel_args.contact
+        return contact is not None and contact.meta[DROPPED] > saved[4][6][DROPPED]
+
+    def _more_pair_room(self) -> bool:
+        # the contact group with pair arrays twice as long, for the frame to be run again (the
+        # same bits as arrays that long from the start: only the dropping depends on their length)
+        grown = with_more_room(self._kernel_args.contact)
+        if grown is None:
+            return False
+        self._kernel_args = self._kernel_args._replace(contact=grown)
+        self._contact = (self._contact[0], grown)
+        return True
 
     def _report_blow_up(self, saved: tuple, steps: int) -> None:
         # Replay the frame one substep at a time (the run is deterministic) to name the substep.

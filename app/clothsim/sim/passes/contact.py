@@ -582,7 +582,9 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
     # (each entry's box beside it, in the table's order: a run's boxes read as one stream, where
     # the boxes by edge cost six scattered reads an entry)
     sbox = np.empty((ne, 6))
+    epos = np.empty(ne, dtype=np.int64)
     for i in range(ne):
+        epos[eids[i]] = i
         for k in range(6):
             sbox[i, k] = ebox[k, eids[i]]
     # (the same for the triangles' boxes, by triangle: one line of memory a box)
@@ -633,31 +635,37 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
         nb = np.int64(0)
         f0, f1 = share(ne, part, parts)
         for e1 in range(f0, f1):
-            x0, x1 = cell_at(egrid, 0, ebox[0, e1] - eext, einv), cell_at(egrid, 0, ebox[3, e1], einv)
+            x1 = cell_at(egrid, 0, ebox[3, e1], einv)
             y0, y1 = cell_at(egrid, 1, ebox[1, e1] - eext, einv), cell_at(egrid, 1, ebox[4, e1], einv)
             z0, z1 = cell_at(egrid, 2, ebox[2, e1] - eext, einv), cell_at(egrid, 2, ebox[5, e1], einv)
             lx, ly, lz, hx, hy, hz = ebox[0, e1], ebox[1, e1], ebox[2, e1], ebox[3, e1], ebox[4, e1], ebox[5, e1]
-            # (the entries tested without branches and the ones that pass gathered in order: a test
-            # that one entry in seven passes is a branch the processor guesses wrong)
+            # each pair once, from the edge that comes first in the table: the columns of cells
+            # before this edge's own skipped, its own read from past its entry (half the entries
+            # read, where a test on the index read every pair from both sides)
+            cx, cy = cell_at(egrid, 0, lx, einv), cell_at(egrid, 1, ly, einv)
             m = np.int64(0)
-            for ix in range(x0, x1 + 1):
-                for iy in range(y0, y1 + 1):
+            for ix in range(cx, x1 + 1):
+                for iy in range(y0 if ix > cx else cy, y1 + 1):
                     r0 = estart[index_of(egrid, ix, iy, z0)]
                     r1 = estart[index_of(egrid, ix, iy, z1) + 1]
+                    if ix == cx and iy == cy:
+                        r0 = max(r0, epos[e1] + 1)
                     cost += r1 - r0 + 1
+                    # (the entries tested without branches and the ones that pass gathered in
+                    # order: a test that one entry in seven passes is a branch the processor
+                    # guesses wrong)
                     for i in range(r0, r1):
-                        e2 = eids[i]
-                        # (only later edges: each pair once)
-                        hit[m] = e2
-                        m += ((e2 > e1) & (sbox[i, 0] <= hx) & (sbox[i, 3] >= lx) & (sbox[i, 1] <= hy)
-                              & (sbox[i, 4] >= ly) & (sbox[i, 2] <= hz) & (sbox[i, 5] >= lz))
-            p1, q1 = edges[0, e1], edges[1, e1]
+                        hit[m] = eids[i]
+                        m += ((sbox[i, 0] <= hx) & (sbox[i, 3] >= lx) & (sbox[i, 1] <= hy) & (sbox[i, 4] >= ly)
+                              & (sbox[i, 2] <= hz) & (sbox[i, 5] >= lz))
             for j in range(m):
-                e2 = hit[j]
-                p2, q2 = edges[0, e2], edges[1, e2]
+                # (a pair stored lower edge first, as the moves store it)
+                a, b = min(e1, hit[j]), max(e1, hit[j])
+                p1, q1 = edges[0, a], edges[1, a]
+                p2, q2 = edges[0, b], edges[1, b]
                 if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
                     continue
-                nb = _add_pair(xin, pairs, nb, x, p1, q1, p2, q2, e1, e2)
+                nb = _add_pair(xin, pairs, nb, x, p1, q1, p2, q2, a, b)
                 cost += TEST_COST
                 if nb == BATCH:
                     _segments_batch(xin, out, nb)
@@ -726,6 +734,10 @@ def join(x: np.ndarray, c: Contact, parts: int, rows: int) -> None:
     pairs in one run, in part order, and each point's ball from the nearest of its bounds."""
     npt, lost_pt = _gather_pairs(c.pt, c.ptf, c.found, 0, parts)
     nee, lost_ee = _gather_pairs(c.ee, c.eef, c.found, 1, parts)
+    # (the point-triangle pairs come in order, by point then triangle; the edge-edge ones in the
+    # order of the broad phase's cells, so they are put in order of their edges: the response's
+    # sums, and so the bits, then depend on which pairs there are, not on how they were found)
+    _in_order(c.ee, c.eef, nee, c.edges.shape[1])
     n = x.shape[1]
     # (element by element: an array assigned to a slice compiles Numba's error-message string
     # code, about 3 s of a cold start)
@@ -747,6 +759,36 @@ def join(x: np.ndarray, c: Contact, parts: int, rows: int) -> None:
     c.meta[DROPPED] += lost_pt + lost_ee
     c.meta[REBUILDS] += 1
     c.meta[CLAMPED] = 0
+
+
+@njit(**EXACT)
+def _in_order(ids: np.ndarray, data: np.ndarray, n: int, width: int) -> None:
+    """The first ``n`` columns of ``ids`` (2, M) (values below ``width``) and ``data`` sorted by
+    ``ids[0]``, then ``ids[1]``: two stable counting sorts, the second key first."""
+    if n < 2:
+        return
+    tid = np.empty((2, n), dtype=np.int64)
+    tdata = np.empty((data.shape[0], n))
+    count = np.empty(width + 1, dtype=np.int64)
+    for key in (1, 0):
+        for k in range(width + 1):
+            count[k] = 0
+        for j in range(n):
+            count[ids[key, j] + 1] += 1
+        for k in range(width):
+            count[k + 1] += count[k]
+        for j in range(n):
+            to = count[ids[key, j]]
+            count[ids[key, j]] += 1
+            tid[0, to] = ids[0, j]
+            tid[1, to] = ids[1, j]
+            for r in range(data.shape[0]):
+                tdata[r, to] = data[r, j]
+        for j in range(n):
+            ids[0, j] = tid[0, j]
+            ids[1, j] = tid[1, j]
+            for r in range(data.shape[0]):
+                data[r, j] = tdata[r, j]
 
 
 @njit(**BORROWED)
@@ -1354,6 +1396,29 @@ def restore_reference(c: Contact, saved: tuple) -> None:
     c.ee[:, :ee.shape[1]] = ee
     c.eef[:, :eef.shape[1]] = eef
     c.meta[...] = meta
+
+
+#: The pair arrays grow while frames drop pairs (see :func:`with_more_room`), up to this many
+#: bytes in all.
+MOST_PAIR_BYTES = 1 << 30
+
+
+def with_more_room(c: Contact) -> Contact | None:
+    """``c`` with pair arrays twice as long (what they hold copied over), or None when they would
+    pass ``MOST_PAIR_BYTES``. A frame whose rebuilds or moves found more pairs than the arrays
+    hold (``meta[DROPPED]`` grew) is run again from its start with them (the simulation does
+    it): a pair left out is one the response does not push, and cloth wrung between moving pins
+    then closes on them faster than their balls allow (the stress set's twist crossed itself)."""
+    cap = 2 * c.pt.shape[1]
+    if cap * 8 * (c.pt.shape[0] + c.ptf.shape[0] + c.ee.shape[0] + c.eef.shape[0]) > MOST_PAIR_BYTES:
+        return None
+
+    def grown(a: np.ndarray) -> np.ndarray:
+        b = np.zeros((a.shape[0], cap), dtype=a.dtype)
+        b[:, : a.shape[1]] = a
+        return b
+
+    return c._replace(pt=grown(c.pt), ptf=grown(c.ptf), ee=grown(c.ee), eef=grown(c.eef))
 
 
 def response_reach(c: Contact) -> float:
