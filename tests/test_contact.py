@@ -56,6 +56,15 @@ def folded_cloth(frames: int = 70) -> Simulation:
     raise AssertionError(f"the 20 x 20 cloth had no frame from {frames} to {frames + 59} with pairs of both kinds")
 
 
+def with_pair_arrays(make, columns: int):  # noqa: ANN001, ANN201
+    """``make`` (``contact_group``) giving groups whose pair arrays have ``columns`` columns."""
+    def short(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        c = make(*args, **kwargs)
+        return c._replace(pt=np.zeros((2, columns), np.int64), ptf=np.zeros((6, columns)),
+                          ee=np.zeros((2, columns), np.int64), eef=np.zeros((5, columns)))
+    return short
+
+
 def flag_scene(nw: int = 27, nh: int = 18, mode: str = "contact", pin_motion: dict | None = None):
     raw = {"cloth": {"width": 1.5, "height": 1.0, "num_width_points": nw, "num_height_points": nh, "thickness": 0.01,
                      "orientation": "vertical", "pinned": [[0, j] for j in range(nh)], "damping": 0.05,
@@ -335,15 +344,8 @@ def test_a_part_over_its_share_has_the_first_member_search_the_rebuild_again_in_
     from clothsim.sim import simulation as simulation_module
     from clothsim.sim.passes.contact import DROPPED, PARTS, overflowed
 
-    usual = simulation_module.contact_group
-
-    def short(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
-        c = usual(*args, **kwargs)
-        return c._replace(pt=np.zeros((2, 200), np.int64), ptf=np.zeros((6, 200)), ee=np.zeros((2, 200), np.int64),
-                          eef=np.zeros((5, 200)))
-
     want = Simulation(self_collision_scene(20))
-    monkeypatch.setattr(simulation_module, "contact_group", short)
+    monkeypatch.setattr(simulation_module, "contact_group", with_pair_arrays(simulation_module.contact_group, 200))
     got = Simulation(self_collision_scene(20))
     fell_back = 0
     for _ in range(60):
@@ -362,12 +364,7 @@ def test_a_frame_that_finds_more_pairs_than_the_arrays_hold_is_run_again_with_lo
     from clothsim.sim.passes.contact import DROPPED
 
     usual = simulation_module.contact_group
-
-    def short(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
-        c = usual(*args, **kwargs)
-        return c._replace(pt=np.zeros((2, 8), np.int64), ptf=np.zeros((6, 8)), ee=np.zeros((2, 8), np.int64),
-                          eef=np.zeros((5, 8)))
-
+    short = with_pair_arrays(usual, 8)
     for integrator in ("verlet", "xpbd"):
         monkeypatch.setattr(simulation_module, "contact_group", usual)
         want = Simulation(self_collision_scene(16, integrator=integrator))

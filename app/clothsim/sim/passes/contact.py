@@ -552,11 +552,13 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
     each edge's box, widened by half the radius, goes once into the cell of its lower corner
     (cells ``1 / EDGE_SPLIT`` of the largest box); each edge reads the cells where an overlapping
     box can have its lower corner (from its own lower corner less the largest box to its upper
-    corner) and tests the later edges found there. The pairs found are tested
-    ``BATCH`` at a time (:func:`_triangles_batch`, :func:`_segments_batch`), with the bits of
-    :func:`_point_triangle` and :func:`_edge_edge`, and taken in the order found. A part's points
-    and edges are a contiguous range, so the parts' pairs, one part after another, are the pairs
-    one sweep over all of them finds, in its order.
+    corner) and tests the edges found there that come after it in the table (each pair once,
+    stored lower edge first). The pairs found are tested ``BATCH`` at a time
+    (:func:`_triangles_batch`, :func:`_segments_batch`), with the bits of :func:`_point_triangle`
+    and :func:`_edge_edge`, and taken in the order found. A part's points and edges are a
+    contiguous range, so the parts' pairs, one part after another, are the pairs one sweep over
+    all of them finds, in its order (which :func:`join` then sorts by edge for the edge-edge
+    pairs).
     """
     n = x.shape[1]
     radius = c.radius
