@@ -437,6 +437,31 @@ def test_a_pin_that_leaves_a_small_ball_is_counted_in_that_substep() -> None:
     assert (c.meta[REBUILDS], c.meta[UNSAFE]) == (2, 1)
 
 
+def test_a_pin_put_out_of_its_ball_through_the_api_is_counted() -> None:
+    # a pin moved between frames through the API jumps there in no substep, so no pass bounds
+    # it: out of its ball it is counted unsafe once, inside it (or with no reference) not at all
+    from clothsim.sim.passes.contact import UNSAFE
+
+    scene = self_collision_scene(12)
+    scene = scene.with_cloth(pinned=[[0, 0]])
+    sim = Simulation(scene)
+    sim.step(2)
+    c = sim._kernel_args.contact
+    pin = int(np.flatnonzero(sim.pinned)[0])
+    ball = float(np.sqrt(c.rho2[pin]))
+    assert ball > 0.0 and c.meta[UNSAFE] == 0
+    sim.positions[pin, 0] += 0.5 * ball
+    sim.step(1)
+    assert c.meta[UNSAFE] == 0
+    sim.positions[pin, 0] += 3.0 * float(np.sqrt(c.rho2[pin])) + 1e-6
+    sim.step(1)
+    assert c.meta[UNSAFE] == 1
+    sim.reset()
+    sim.positions[pin, 0] += 0.02
+    sim.step(1)
+    assert c.meta[UNSAFE] == 1  # (no reference after reset: a fresh one from where the pin is)
+
+
 @pytest.mark.parametrize("sweeps", [1, 4])
 def test_the_response_pushes_an_isolated_pair_by_its_sweeps(sweeps: int) -> None:
     # A free point 0.05 above a pinned triangle, contact distance 0.1, not moving: each sweep

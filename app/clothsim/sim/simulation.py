@@ -25,8 +25,8 @@ from .passes.pins import move_pins
 from .passes.colliders.mesh import MeshGroup, collide_address
 from .passes.colliders.moving import top_speed
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
-from .passes.contact import DROPPED, MOVING, contact_group, response_reach, restore_reference, snapshot_reference, \
-    with_more_room
+from .passes.contact import DROPPED, MOVING, UNSAFE, VALID, contact_group, response_reach, restore_reference, \
+    snapshot_reference, with_more_room
 from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash
 
 #: The contact mode: a pass of its own (passes/contact.py), not a query of the hash.
@@ -481,11 +481,24 @@ class Simulation:
         # (A point the bound held back gets a new reference in the next substep.)
         contact = self._kernel_args.contact
         if contact is not None:
-            moving = self._kernel_args.pins is not None or not np.array_equal(self._pos[:, self._pins],
-                                                                              self._pins_seen)
+            put = not np.array_equal(self._pos[:, self._pins], self._pins_seen)
+            moving = self._kernel_args.pins is not None or put
             contact.meta[MOVING] = moving
+            if put:
+                self._count_pins_put_out(contact)
             if moving:
                 self._forget_contacts()
+
+    def _count_pins_put_out(self, contact) -> None:  # noqa: ANN001
+        # A pin put outside its ball through the API since the last frame went there in one jump
+        # that no pass could bound (it may have passed through the cloth): counted as an unsafe
+        # substep, as the pass counts a pin that its track moves out of its ball in one substep.
+        if not contact.meta[VALID] or self._pins.shape[0] == 0:
+            return
+        pins = self._pins
+        d2 = ((self._pos[:, pins] - contact.ref[:, pins]) ** 2).sum(axis=0)
+        if np.any(d2 > contact.rho2[pins] * (1.0 + 1e-6) + 1e-28):
+            contact.meta[UNSAFE] += 1
 
     def _check_crossings(self) -> None:
         # once per start: the contact mode keeps a cloth from crossing itself, but cannot undo
