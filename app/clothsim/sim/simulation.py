@@ -25,7 +25,7 @@ from .passes.pins import move_pins
 from .passes.colliders.mesh import MeshGroup, collide_address
 from .passes.colliders.moving import top_speed
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
-from .passes.contact import DROPPED, MOVING, UNSAFE, VALID, contact_group, response_reach, restore_reference, \
+from .passes.contact import DROPPED, MOVING, UNSAFE, any_outside, contact_group, response_reach, restore_reference, \
     snapshot_reference, with_more_room
 from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash
 
@@ -484,21 +484,13 @@ class Simulation:
             put = not np.array_equal(self._pos[:, self._pins], self._pins_seen)
             moving = self._kernel_args.pins is not None or put
             contact.meta[MOVING] = moving
-            if put:
-                self._count_pins_put_out(contact)
+            # (a pin put outside its ball through the API since the last frame went there in one
+            # jump that no pass could bound, maybe through the cloth: an unsafe substep, as the
+            # pass counts a pin that its track moves out of its ball in one substep)
+            if put and any_outside(self._pos, contact, self._pins):
+                contact.meta[UNSAFE] += 1
             if moving:
                 self._forget_contacts()
-
-    def _count_pins_put_out(self, contact) -> None:  # noqa: ANN001
-        # A pin put outside its ball through the API since the last frame went there in one jump
-        # that no pass could bound (it may have passed through the cloth): counted as an unsafe
-        # substep, as the pass counts a pin that its track moves out of its ball in one substep.
-        if not contact.meta[VALID] or self._pins.shape[0] == 0:
-            return
-        pins = self._pins
-        d2 = ((self._pos[:, pins] - contact.ref[:, pins]) ** 2).sum(axis=0)
-        if np.any(d2 > contact.rho2[pins] * (1.0 + 1e-6) + 1e-28):
-            contact.meta[UNSAFE] += 1
 
     def _check_crossings(self) -> None:
         # once per start: the contact mode keeps a cloth from crossing itself, but cannot undo
@@ -526,8 +518,9 @@ class Simulation:
         saved = (self._pos.copy(), self._last.copy(), None if state is None else state.copy(), self._clock.copy(),
                  self._contact_snapshot())
         steps = self.scene.simulation.simulation_steps
+        dropped = self._pairs_dropped()
         run(steps, saved)
-        while self._dropped_pairs(saved) and self._more_pair_room():
+        while self._pairs_dropped() > dropped and self._more_pair_room():
             self._restore(saved)
             run(steps, saved)
         if self._kernel_args.contact is not None:
@@ -536,10 +529,10 @@ class Simulation:
             self._report_blow_up(saved, steps)
         self.frame += 1
 
-    def _dropped_pairs(self, saved: tuple) -> bool:
-        # whether the frame just run found more contact pairs than the pair arrays hold
+    def _pairs_dropped(self) -> int:
+        # the contact pairs found beyond the pair arrays' room so far
         contact = self._kernel_args.contact
-        return contact is not None and contact.meta[DROPPED] > saved[4][6][DROPPED]
+        return 0 if contact is None else int(contact.meta[DROPPED])
 
     def _more_pair_room(self) -> bool:
         # the contact group with pair arrays twice as long, for the frame to be run again (the

@@ -577,7 +577,7 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
     ne = ebox.shape[1]
     eext = 0.0
     for e in range(ne):
-        eext = max(eext, ebox[3, e] - ebox[0, e], ebox[4, e] - ebox[1, e], ebox[5, e] - ebox[2, e])
+        eext = max(eext, extent(ebox, e))
     egrid, ecell = grid_over(ebox, max(eext / EDGE_SPLIT, 1e-300), GRID_CELLS * ne + 64)
     estart, eids = corner_table(ebox, egrid, ecell)
     einv = 1.0 / ecell
@@ -859,19 +859,34 @@ def _leaving(x: np.ndarray, c: Contact, most: int) -> int:
     return count
 
 
+#: A point is outside its ball when its squared distance from its reference passes the squared
+#: radius x (1 + OUTSIDE_REL) + OUTSIDE_ABS: by more than rounding (a ball of a few nanometres,
+#: next to an element the cloth was given crossing, is placed to 1e-16 m).
+OUTSIDE_REL = 1e-6
+OUTSIDE_ABS = 1e-28
+
+
 @njit(**KERNEL)
 def _outside(x: np.ndarray, c: Contact) -> bool:
-    """True when a point of ``x`` lies outside its ball (by more than rounding: a ball of a few
-    nanometres, next to an element the cloth was given crossing, is placed to 1e-16 m)."""
+    """True when a point of ``x`` lies outside its ball (see OUTSIDE_REL)."""
     ref = c.ref
     rho2 = c.rho2
     for p in range(x.shape[1]):
         dx = x[0, p] - ref[0, p]
         dy = x[1, p] - ref[1, p]
         dz = x[2, p] - ref[2, p]
-        if dx * dx + dy * dy + dz * dz > rho2[p] * (1.0 + 1e-6) + 1e-28:
+        if dx * dx + dy * dy + dz * dz > rho2[p] * (1.0 + OUTSIDE_REL) + OUTSIDE_ABS:
             return True
     return False
+
+
+def any_outside(x: np.ndarray, c: Contact, points: np.ndarray) -> bool:
+    """Whether one of ``points`` of ``x`` (3, N) lies outside its ball, by :func:`_outside`'s rule
+    (for the simulation's few pins between frames, in NumPy)."""
+    if not c.meta[VALID] or points.shape[0] == 0:
+        return False
+    d2 = ((x[:, points] - c.ref[:, points]) ** 2).sum(axis=0)
+    return bool(np.any(d2 > c.rho2[points] * (1.0 + OUTSIDE_REL) + OUTSIDE_ABS))
 
 
 # ------------------------------------------------------------------------------------------------
