@@ -163,6 +163,21 @@ def test_profile_lists_passes_and_what_was_skipped(tmp_path):
     assert "colliders" in r.stdout and "self-collision" in r.stdout and "bounding-box" in r.stdout
 
 
+def test_bench_passes_times_each_pass_member_by_member(tmp_path):
+    r = run_cli("bench", "passes", "pinned4", "--frames", "2", "--warmup", "1", "--self-collision", "off")
+    assert r.returncode == 0, r.stderr
+    assert "waiting" in r.stdout and "gather and Verlet" in r.stdout and "Provot: bands" in r.stdout
+    assert "hash: query" not in r.stdout  # no self-collision: no such pass
+    r = run_cli("bench", "passes", "pinned4", "--frames", "0")
+    assert r.returncode == 2 and "--frames" in r.stderr and "Traceback" not in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1
+    other = tmp_path / "xpbd.json"
+    other.write_text(json.dumps({**GOOD, "simulation": {"integrator": "xpbd"}}))
+    r = run_cli("bench", "passes", str(other), "--frames", "1", "--warmup", "0")
+    assert r.returncode == 0, r.stderr
+    assert "does not run the frame kernel" in r.stdout
+
+
 @pytest.mark.parametrize("profile", [[], ["--profile"]], ids=["plain", "profiled"])
 def test_a_blow_up_stops_the_run_with_or_without_profile(tmp_path, profile):
     # ks 1e7 at one substep a frame is far past the explicit step bound: the guard must end the run

@@ -16,7 +16,7 @@ from clothsim.sim import team
 from clothsim.sim.solvers import frame
 from clothsim.sim.solvers.frame import PASS_ALL
 from clothsim.jit import CHUNKS
-from clothsim.sim.profile import Profiler
+from clothsim.sim.profile import FrameLaps, Profiler
 from clothsim.sim.passes.selfcollide import count_slots, place_slots, query_share, scatter_slots, sort_by_slot
 from clothsim.sim.team import share
 
@@ -39,14 +39,14 @@ def _run(scene, frames: int, size: int) -> tuple[np.ndarray, list[int]]:
 
 
 CASES = [("selfCollision", {}), ("sphere", {}), ("pinned2", {"self_collision": "grid"}),
-         ("pinned4", {"self_collision": "off", "max_stretch": None})]
+         ("pinned4", {"self_collision": "off", "max_stretch": None}), ("heap", {"self_collision": "contact"})]
 
 needs_two_threads = pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2,
                                        reason="Numba has one thread here: a team of two would be one member alone")
 
 
 @needs_two_threads
-@pytest.mark.parametrize(("name", "simulation"), CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize(("name", "simulation"), CASES, ids=[f"{c[0]}-{c[1].get('self_collision', 'own')}" for c in CASES])
 def test_team_size_does_not_change_the_numbers(name: str, simulation: dict, all_threads: int) -> None:
     scene = _scene(name, **simulation)
     one, _ = _run(scene, 12, 1)
@@ -56,7 +56,7 @@ def test_team_size_does_not_change_the_numbers(name: str, simulation: dict, all_
     assert modes.count(team._TEAM) >= 6
 
 
-@pytest.mark.parametrize(("name", "simulation"), CASES, ids=[c[0] for c in CASES])
+@pytest.mark.parametrize(("name", "simulation"), CASES, ids=[f"{c[0]}-{c[1].get('self_collision', 'own')}" for c in CASES])
 def test_fused_frame_matches_pass_by_pass_profile(name: str, simulation: dict) -> None:
     scene = _scene(name, **simulation)
     fused = clothsim.Simulation(scene)
@@ -66,6 +66,50 @@ def test_fused_frame_matches_pass_by_pass_profile(name: str, simulation: dict) -
     for _ in range(8):
         profiler.frame()
     assert np.array_equal(fused.positions, profiled.positions)
+
+
+TIMED = [("selfCollision", {}, ("springs and forces", "gather and Verlet", "hash: query", "colliders", "Provot: bands")),
+         ("pinned2", {"self_collision": "contact"}, ("contact: stale?", "contact: join, moves, response",
+                                                     "contact: bound")),
+         ("pinned4", {"self_collision": "off", "max_stretch": None}, ("gather and Verlet",))]
+ABSENT = {"selfCollision": ("contact: bound", "grid self-collision"), "pinned2": ("hash: query", "colliders"),
+          "pinned4": ("hash: query", "colliders", "Provot: bands")}
+
+
+@pytest.mark.parametrize(("name", "simulation", "present"), TIMED, ids=[c[0] for c in TIMED])
+def test_timed_frames_give_the_same_numbers_and_time_each_pass_the_scene_runs(name: str, simulation: dict,
+                                                                             present: tuple, all_threads: int) -> None:
+    scene = _scene(name, **simulation)
+    plain = clothsim.Simulation(scene)
+    plain.step(6)
+    timed = clothsim.Simulation(scene)
+    laps = FrameLaps(timed)
+    began = time.perf_counter()
+    for _ in range(6):
+        laps.frame()
+    took = time.perf_counter() - began
+    assert np.array_equal(plain.positions, timed.positions)
+    assert laps.frames == 6 and laps.substeps == 6 * scene.simulation.simulation_steps
+    # the laps follow each other inside the calls; the members wait no longer than they are there
+    spent = laps.ns[:, 0].sum() * 1e-9
+    assert 0 < spent <= took
+    assert (laps.ns[:, 1] <= laps.members * laps.ns[:, 0]).all()
+    report = laps.report()
+    for lap in present:
+        assert lap in report
+        assert laps.ns[frame.LAP_NAMES.index(lap), 0] > 0
+    for lap in ABSENT[name]:
+        assert lap not in report and not laps.ns[frame.LAP_NAMES.index(lap)].any()
+
+
+def test_laps_fit_the_teams_counters() -> None:
+    assert len(frame.LAP_NAMES) <= team.MOST_LAPS
+    assert team.SYNC_SIZE == team.LAPS + 2 * team.MOST_LAPS
+
+
+def test_only_the_spec_verlet_is_timed_inside_its_frame() -> None:
+    with pytest.raises(ValueError, match="verlet"):
+        FrameLaps(clothsim.Simulation(_scene("pinned4", integrator="xpbd")))
 
 
 def test_more_members_than_threads_falls_back_to_one() -> None:

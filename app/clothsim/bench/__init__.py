@@ -1,1 +1,1 @@
-"""Benchmarks: speed, render, accuracy, stability, scaling."""
+"""Benchmarks: speed, render, accuracy, stability, scaling, and the rest `clothsim bench` lists."""

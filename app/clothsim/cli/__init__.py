@@ -69,7 +69,8 @@ def build_parser() -> argparse.ArgumentParser:
     from .crossings import add_parser as add_crossings_parser
 
     add_crossings_parser(sub)
-    bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling, sweep, colliders, serve, selfcollision",
+    bench = sub.add_parser("bench", help="benchmarks: speed, render, accuracy, stability, scaling, sweep, colliders, serve, selfcollision, "
+                           "passes",
                            description="Benchmarks that print figures measured on this machine.")
     bench_sub = bench.add_subparsers(dest="bench_command", metavar="BENCHMARK")
     bench.set_defaults(func=lambda args: (bench.print_help(), 2)[1])
@@ -78,6 +79,7 @@ def build_parser() -> argparse.ArgumentParser:
     from ..bench import accuracy, scaling, speed, stability
     from ..bench import colliders as bench_colliders
     from ..bench import compile as bench_compile
+    from ..bench import passes as bench_passes
     from ..bench import selfcollision as bench_selfcollision
     from ..bench import serve as bench_serve
     from ..bench import sweep as bench_sweep
@@ -86,7 +88,7 @@ def build_parser() -> argparse.ArgumentParser:
     speed.add_parser(bench_sub)
     add_render_parsers(sub, bench_sub)
     for module in (accuracy, stability, scaling, bench_compile, bench_sweep, bench_serve, bench_colliders,
-                   bench_selfcollision):
+                   bench_selfcollision, bench_passes):
         module.add_parser(bench_sub)
     compiling.add_parser(sub)
     return parser

@@ -1,14 +1,19 @@
 """A visible account of the work a scene does: which passes ran, their share of the time, and
-which were skipped and why (``clothsim simulate --profile``)."""
+which were skipped and why (``clothsim simulate --profile``); and each pass timed inside whole
+frames of the frame kernel, with the thread team's waiting (:class:`FrameLaps`, ``clothsim bench
+passes``)."""
 
 from __future__ import annotations
 
 import time
 
+import numpy as np
 
 from ..colliders import kinds_text
 from .passes.forces import FORCES
-from .solvers.frame import PASS_COLLIDERS, PASS_CONTACT, PASS_INTEGRATE, PASS_PROVOT, PASS_SELF
+from .solvers.frame import LAP_NAMES, PASS_ALL, PASS_COLLIDERS, PASS_CONTACT, PASS_INTEGRATE, PASS_PROVOT, \
+    PASS_SELF, PASS_TIMED
+from .team import ALONE, LAPS, MODE, MOST_LAPS
 
 PASSES = ("forces+integrate", "self-collision", "colliders", "provot", "contact bound")
 
@@ -118,4 +123,65 @@ class Profiler:
         if skipped:
             lines.append("skipped:")
             lines.extend(f"  {name}: {why}" for name, why in skipped.items())
+        return "\n".join(lines)
+
+
+class FrameLaps:
+    """Times every pass of whole frames inside the frame kernel (the spec's Verlet path): for each
+    barrier of a substep, the time from the barrier before it (the pass's slowest member) and the
+    members' time spent waiting at it (:func:`clothsim.sim.team.barrier`). Unlike
+    :class:`Profiler`, which runs each pass in a call of its own, the frame runs as it always
+    does, with its team; only a few clock reads a barrier are added, and the numbers are the
+    same."""
+
+    def __init__(self, sim) -> None:  # noqa: ANN001
+        if not sim.uses_spec_path:
+            raise ValueError("only the spec's Verlet (integrator \"verlet\", damping_mode \"spec\") runs the "
+                             "frame kernel whose passes are timed")
+        self.sim = sim
+        #: (lap, [time, members' waiting]) nanoseconds summed over the timed frames
+        self.ns = np.zeros((MOST_LAPS, 2), dtype=np.int64)
+        self.frames = 0
+        self.substeps = 0
+        self.seconds = 0.0
+        self.members = 1
+
+    def frame(self) -> None:
+        """Advance one frame, timing its passes."""
+        self.sim._advance_frame(self._run)
+
+    def _run(self, steps: int, saved: tuple | None) -> None:
+        sim = self.sim
+        size = sim.team.size() if saved is not None else 1
+        t0 = time.perf_counter()
+        if not sim.run_kernel(steps, PASS_ALL | PASS_TIMED, size):
+            # (the team gave the frame up: run alone from its start, as Simulation._run does)
+            sim._restore(saved)
+            size = 1
+            t0 = time.perf_counter()
+            sim.run_kernel(steps, PASS_ALL | PASS_TIMED, 1)
+        self.seconds += time.perf_counter() - t0
+        if sim._sync[MODE] == ALONE:
+            size = 1
+        self.members = max(self.members, size)
+        self.ns += sim._sync[LAPS:LAPS + 2 * MOST_LAPS].reshape(MOST_LAPS, 2)
+        self.frames += 1
+        self.substeps += steps
+
+    def report(self) -> str:
+        """The table: each pass the frame ran, its microseconds a substep (from the barrier before
+        it to the one after) and the members' microseconds spent waiting at the one after, and its
+        share of the substep."""
+        per = 1e-3 / max(self.substeps, 1)
+        total = self.ns[:, 0].sum() or 1
+        lines = [f"{'pass':<32}{'us':>9}{'waiting':>9}{'share':>8}"]
+        for k, name in enumerate(LAP_NAMES):
+            if self.ns[k, 0] == 0:
+                continue
+            lines.append(f"{name:<32}{self.ns[k, 0] * per:>9.2f}{self.ns[k, 1] * per:>9.2f}"
+                         f"{self.ns[k, 0] / total:>8.1%}")
+        lines.append(f"{'substep':<32}{total * per:>9.2f}{self.ns[:, 1].sum() * per:>9.2f}")
+        lines.append(f"{self.frames} frames, {self.substeps} substeps, {self.members} member"
+                     f"{'s' if self.members != 1 else ''}: {self.seconds / max(self.frames, 1) * 1e3:.3f} ms a "
+                     f"frame ({self.seconds / max(self.substeps, 1) * 1e6:.2f} us a substep) around the kernel")
         return "\n".join(lines)

@@ -429,7 +429,7 @@ class Simulation:
             self._packed = (plan, packed_value(plan, numba.typeof(plan)))
         self.colliders_skipped += run_substeps(steps, plan, self._sync, size, passes, k.member, k.enter,
                                                ctypes.addressof(self._packed[1]))
-        if passes == PASS_ALL:  # pass by pass (the profiler), the caller counts each substep once its passes ran
+        if passes & PASS_ALL == PASS_ALL:  # pass by pass (the profiler), the caller counts each substep once its passes ran
             self._clock[1] += steps
         if self._sync[team.FAILED]:
             raise MemoryError("the frame kernel could not allocate its work space")

@@ -41,7 +41,20 @@ ROLL = 16      # members that answered the roll call
 MODE = 24      # 0 gathering, 1 team, 2 one member alone
 ABORT = 32     # set when a member gave up waiting at a barrier: everyone leaves
 FAILED = 40    # set when a member failed (could not allocate its work space)
-SYNC_SIZE = 48
+# A timed frame (see :func:`barrier`): TIMED set for the whole frame, LAP the lap the members
+# are in (each writes it before the barrier that ends it), RELEASED the clock when the last
+# barrier let the members go, ARRIVALS the sum of the members' clocks on arriving at this one.
+TIMED = 48
+LAP = 49
+RELEASED = 50
+ARRIVALS = 56
+#: Where a timed frame's laps are summed, two slots a lap: the nanoseconds from the barrier before
+#: it to the one that ends it (the slowest member's work), and the members' nanoseconds spent
+#: waiting at the one that ends it.
+LAPS = 64
+#: Laps a frame may time (the barriers of one substep).
+MOST_LAPS = 16
+SYNC_SIZE = LAPS + 2 * MOST_LAPS
 
 _GATHERING, _TEAM = 0, 1
 #: ``sync[MODE]`` after a frame whose members could not run side by side.
@@ -147,12 +160,25 @@ def barrier(sync: np.ndarray, size: int, generation: int) -> int:
     count and then advances the shared generation, which releases the others (and publishes
     everything written before the barrier to them). A member that waits longer than
     :data:`BARRIER_NS` sets ``sync[ABORT]``, which releases everyone.
+
+    In a timed frame (``sync[TIMED]``) each member adds its clock on arriving, and the last to
+    arrive adds to the lap's slots (``sync[LAP]``) the time since the last release and the
+    members' time spent waiting (:func:`_lap_done`).
     """
+    timed = sync[TIMED] != 0
     if size == 1:
+        if timed:
+            _lap_done(sync, monotonic_ns(), 0)
         return generation + 1
     if atomic_load(sync, ABORT) != 0:
         return -1
+    if timed:
+        atomic_add(sync, ARRIVALS, monotonic_ns())
     if atomic_add(sync, ARRIVED, 1) == size - 1:
+        if timed:
+            now = monotonic_ns()
+            _lap_done(sync, now, size * now - sync[ARRIVALS])
+            sync[ARRIVALS] = 0
         sync[ARRIVED] = 0
         atomic_add(sync, GENERATION, 1)
         return generation + 1
@@ -172,6 +198,16 @@ def barrier(sync: np.ndarray, size: int, generation: int) -> int:
                 atomic_cas(sync, ABORT, 0, 1)
                 return -1
     return generation + 1
+
+
+@njit(inline="always", **EXACT)
+def _lap_done(sync: np.ndarray, now: int, waited: int) -> None:
+    # the lap in sync[LAP] ends at ``now`` (its last member has arrived), the members having waited
+    # ``waited`` ns at its barrier; the next lap starts
+    k = LAPS + 2 * sync[LAP]
+    sync[k] += now - sync[RELEASED]
+    sync[k + 1] += waited
+    sync[RELEASED] = now
 
 
 @njit(**EXACT)
