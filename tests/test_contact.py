@@ -576,3 +576,40 @@ def test_the_references_moved_point_by_point_hold_what_a_rebuild_from_them_would
     while checked < 20 and sim.frame < 90:
         sim._advance_frame(substeps)
     assert checked == 20 and in_contact > 50 and c.meta[MOVED] > c.meta[LOCALS] > 0
+
+
+def _nbytes(x) -> int:  # noqa: ANN001
+    return x.nbytes if isinstance(x, np.ndarray) else sum(_nbytes(y) for y in x) if isinstance(x, tuple) else 0
+
+
+def test_the_memory_check_counts_the_contact_modes_arrays_and_a_rebuilds_tables(monkeypatch) -> None:
+    # the pass's group and a rebuild's tables (built here as the search builds them, on the folded
+    # cloth) fit in what the check counts a point; a grid that fits in the spec's mode but not with
+    # the contact mode's arrays is refused, naming the grid
+    import clothsim.scene as scene_module
+    from clothsim.jit import CHUNKS
+    from clothsim.sim.passes.celltables import box_table, corner_table, grid_over
+    from clothsim.sim.passes.contact import EDGE_SPLIT, GRID_CELLS, _element_boxes
+    from clothsim.sim.passes.nearby import extent
+
+    sim = folded_cloth()
+    c = sim._kernel_args.contact
+    n = sim.positions.shape[0]
+    assert _nbytes(c) / n * 1.25 <= scene_module.CONTACT_BYTES_PER_POINT
+    x = np.ascontiguousarray(sim.positions.T)
+    tbox = _element_boxes(x, c.tris, c.radius)
+    grid, tcell = grid_over(tbox, c.cell, GRID_CELLS * tbox.shape[1] + 64)
+    tables = [tbox, *box_table(tbox, grid, tcell), tbox]  # (the boxes, by triangle again)
+    ebox = _element_boxes(x, c.edges, 0.5 * c.radius)
+    eext = max(extent(ebox, e) for e in range(ebox.shape[1]))
+    egrid, ecell = grid_over(ebox, eext / EDGE_SPLIT, GRID_CELLS * ebox.shape[1] + 64)
+    # (the edges' boxes, their table, the boxes in table order, each entry's place, the hits)
+    tables += [ebox, *corner_table(ebox, egrid, ecell), ebox, np.empty(2 * ebox.shape[1], np.int64)]
+    assert _nbytes(tuple(tables)) / n * 1.25 <= scene_module.CONTACT_SEARCH_BYTES_PER_POINT
+    assert scene_module.MOST_MEMBERS == CHUNKS
+    spec, contact = self_collision_scene(40, mode="spec"), self_collision_scene(40)
+    need = scene_module.bytes_per_point(spec.simulation) * 1600
+    monkeypatch.setattr(scene_module, "available_memory", lambda: need + 100)
+    scene_module.check_memory(spec)
+    with pytest.raises(SceneError, match="40x40 grid would need about"):
+        scene_module.check_memory(contact)

@@ -41,6 +41,17 @@ SELF_COLLISION_MODES = ("spec", "grid", "off", "contact")
 # not see (Numba's allocations inside kernels) and for the output's copies (.npz, vertex buffers).
 BYTES_PER_POINT = 1024
 BYTES_PER_POINT_OTHER_INTEGRATORS = 1728
+# What the contact self-collision mode adds a point, counted from its arrays' sizes (not
+# measured by tracemalloc: the search's tables are Numba's), plus 25 % as above: its group, 2,791-
+# 2,801 B from 20x20 to 256x256 (pair arrays for 16 pairs of each kind a point, 1,920 B; the
+# reference, the balls, the points' and elements' cells), and for each member of the thread team
+# searching a rebuild, that search's tables (the elements' boxes, their grids' runs and entries,
+# the boxes copied in table order): 618 B on the folded 20x20 cloth, counted as 1,024 B since a
+# grid may have up to 8 cells an element.
+CONTACT_BYTES_PER_POINT = 3584
+CONTACT_SEARCH_BYTES_PER_POINT = 1280
+#: The thread team's most members (clothsim.jit.CHUNKS, not imported here: that loads Numba).
+MOST_MEMBERS = 8
 
 
 @dataclass(frozen=True)
@@ -414,9 +425,15 @@ def available_memory() -> int:
 
 def bytes_per_point(simulation: SimulationSpec) -> int:
     """Memory a run needs per grid point (see BYTES_PER_POINT): the spec's Verlet keeps no state
-    beyond the Simulation; every other integrator or damping mode keeps its own."""
+    beyond the Simulation; every other integrator or damping mode keeps its own; the contact
+    mode adds its pairs and cells, and a rebuild's tables for each member of the team that may
+    search it (on the spec's Verlet, as many as the machine has cores, up to the team's most)."""
     spec_path = simulation.integrator == "verlet" and simulation.damping_mode == "spec"
-    return BYTES_PER_POINT if spec_path else BYTES_PER_POINT_OTHER_INTEGRATORS
+    need = BYTES_PER_POINT if spec_path else BYTES_PER_POINT_OTHER_INTEGRATORS
+    if simulation.self_collision == "contact":
+        searching = min(MOST_MEMBERS, os.cpu_count() or 1) if spec_path else 1
+        need += CONTACT_BYTES_PER_POINT + searching * CONTACT_SEARCH_BYTES_PER_POINT
+    return need
 
 
 def check_memory(scene: Scene) -> None:
