@@ -2,8 +2,8 @@
 kernel. Each scene is simulated past its warm-up, then frames are timed whole, with the thread
 team (:class:`clothsim.sim.profile.FrameLaps`): the microseconds a substep of each pass, from
 the barrier before it to the one after it (its slowest member), and the members' microseconds
-spent waiting at the one after it. ``clothsim simulate --profile`` runs
-each pass in a call of its own instead, which adds a call's cost to every pass."""
+spent waiting at the one after it. ``clothsim simulate --profile`` runs each pass in a call of
+its own instead, which adds a call's cost to every pass."""
 
 from __future__ import annotations
 
