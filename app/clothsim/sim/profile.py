@@ -13,7 +13,7 @@ from ..colliders import kinds_text
 from .passes.forces import FORCES
 from .solvers.frame import LAP_NAMES, PASS_ALL, PASS_COLLIDERS, PASS_CONTACT, PASS_INTEGRATE, PASS_PROVOT, \
     PASS_SELF, PASS_TIMED
-from .team import ALONE, LAPS, MODE, MOST_LAPS
+from .team import LAPS, MOST_LAPS
 
 PASSES = ("forces+integrate", "self-collision", "colliders", "provot", "contact bound")
 
@@ -152,18 +152,9 @@ class FrameLaps:
 
     def _run(self, steps: int, saved: tuple | None) -> None:
         sim = self.sim
-        size = sim.team.size() if saved is not None else 1
         t0 = time.perf_counter()
-        if not sim.run_kernel(steps, PASS_ALL | PASS_TIMED, size):
-            # (the team gave the frame up: run alone from its start, as Simulation._run does)
-            sim._restore(saved)
-            size = 1
-            t0 = time.perf_counter()
-            sim.run_kernel(steps, PASS_ALL | PASS_TIMED, 1)
+        self.members = max(self.members, sim._run(steps, saved, PASS_ALL | PASS_TIMED))
         self.seconds += time.perf_counter() - t0
-        if sim._sync[MODE] == ALONE:
-            size = 1
-        self.members = max(self.members, size)
         self.ns += sim._sync[LAPS:LAPS + 2 * MOST_LAPS].reshape(MOST_LAPS, 2)
         self.frames += 1
         self.substeps += steps

@@ -436,20 +436,23 @@ class Simulation:
         self.team.after(self._sync, size)
         return self._sync[team.ABORT] == 0
 
-    def _run(self, steps: int, saved: tuple | None = None) -> None:
-        """Advance the next ``steps`` substeps. With ``saved`` (the state before them), the fast
-        path may use the thread team and, if the team gives up half-way, restores ``saved`` and
-        runs alone."""
+    def _run(self, steps: int, saved: tuple | None = None, passes: int = PASS_ALL) -> int:
+        """Advance the next ``steps`` substeps; returns how many threads ran them. With ``saved``
+        (the state before them), the fast path may use the thread team and, if the team gives up
+        half-way, restores ``saved`` and runs alone. ``passes`` may add PASS_TIMED to PASS_ALL
+        (:class:`~clothsim.sim.profile.FrameLaps`)."""
         if not self.uses_spec_path:
             from .solvers import advance
 
             advance(self, steps)
             self._clock[1] += steps
-            return
+            return 1
         size = self.team.size() if saved is not None else 1
-        if not self.run_kernel(steps, PASS_ALL, size):
+        if not self.run_kernel(steps, passes, size):
             self._restore(saved)
-            self.run_kernel(steps, PASS_ALL, 1)
+            size = 1
+            self.run_kernel(steps, passes, 1)
+        return 1 if self._sync[team.MODE] == team.ALONE else size
 
     def _restore(self, saved: tuple) -> None:
         self._pos[...] = saved[0]

@@ -41,11 +41,9 @@ ROLL = 16      # members that answered the roll call
 MODE = 24      # 0 gathering, 1 team, 2 one member alone
 ABORT = 32     # set when a member gave up waiting at a barrier: everyone leaves
 FAILED = 40    # set when a member failed (could not allocate its work space)
-# A timed frame (see :func:`barrier`): TIMED set for the whole frame, LAP the lap the members
-# are in (each writes it before the barrier that ends it), RELEASED the clock when the last
-# barrier let the members go, ARRIVALS the sum of the members' clocks on arriving at this one.
+# A timed frame (see :func:`barrier`): TIMED set for the whole frame, RELEASED the clock when the
+# last barrier let the members go, ARRIVALS the sum of the members' clocks on arriving at this one.
 TIMED = 48
-LAP = 49
 RELEASED = 50
 ARRIVALS = 56
 #: Where a timed frame's laps are summed, two slots a lap: the nanoseconds from the barrier before
@@ -152,7 +150,7 @@ def roll_call(sync: np.ndarray, size: int) -> int:
 
 
 @njit(**EXACT)
-def barrier(sync: np.ndarray, size: int, generation: int) -> int:
+def barrier(sync: np.ndarray, size: int, generation: int, lap: int) -> int:
     """Wait until all ``size`` members have arrived; returns the next generation number, or -1
     when the frame was given up (``sync[ABORT]``): the member must then leave at once.
 
@@ -162,13 +160,13 @@ def barrier(sync: np.ndarray, size: int, generation: int) -> int:
     :data:`BARRIER_NS` sets ``sync[ABORT]``, which releases everyone.
 
     In a timed frame (``sync[TIMED]``) each member adds its clock on arriving, and the last to
-    arrive adds to the lap's slots (``sync[LAP]``) the time since the last release and the
-    members' time spent waiting (:func:`_lap_done`).
+    arrive adds to the slots of ``lap`` (the pass the barrier ends) the time since the last
+    release and the members' time spent waiting (:func:`_lap_done`).
     """
     timed = sync[TIMED] != 0
     if size == 1:
         if timed:
-            _lap_done(sync, monotonic_ns(), 0)
+            _lap_done(sync, lap, monotonic_ns(), 0)
         return generation + 1
     if atomic_load(sync, ABORT) != 0:
         return -1
@@ -177,7 +175,7 @@ def barrier(sync: np.ndarray, size: int, generation: int) -> int:
     if atomic_add(sync, ARRIVED, 1) == size - 1:
         if timed:
             now = monotonic_ns()
-            _lap_done(sync, now, size * now - sync[ARRIVALS])
+            _lap_done(sync, lap, now, size * now - sync[ARRIVALS])
             sync[ARRIVALS] = 0
         sync[ARRIVED] = 0
         atomic_add(sync, GENERATION, 1)
@@ -201,10 +199,10 @@ def barrier(sync: np.ndarray, size: int, generation: int) -> int:
 
 
 @njit(inline="always", **EXACT)
-def _lap_done(sync: np.ndarray, now: int, waited: int) -> None:
-    # the lap in sync[LAP] ends at ``now`` (its last member has arrived), the members having waited
-    # ``waited`` ns at its barrier; the next lap starts
-    k = LAPS + 2 * sync[LAP]
+def _lap_done(sync: np.ndarray, lap: int, now: int, waited: int) -> None:
+    # ``lap`` ends at ``now`` (its last member has arrived), the members having waited ``waited``
+    # ns at its barrier; the next lap starts
+    k = LAPS + 2 * lap
     sync[k] += now - sync[RELEASED]
     sync[k + 1] += waited
     sync[RELEASED] = now

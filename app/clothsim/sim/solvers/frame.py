@@ -58,7 +58,7 @@ from ..passes.contact import CUT, FLAG, STALE, contact_bound, contact_joined, co
     fall_back, overflowed
 from ..passes.selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from ..state import Plan
-from ..team import ABORT, FAILED, LAP, RELEASED, TIMED, atomic_cas, barrier, roll_call, share
+from ..team import ABORT, FAILED, RELEASED, TIMED, atomic_cas, barrier, roll_call, share
 
 #: Pass bits of :func:`run_substeps`: spring forces and Verlet, self-collision, colliders, Provot,
 #: the contact mode's pass; and PASS_TIMED, which times every pass of the frame (team.barrier).
@@ -67,7 +67,7 @@ PASS_ALL = 31
 PASS_TIMED = 32
 
 #: The laps of a timed frame (PASS_TIMED): the barriers of a substep, each named for the pass before
-#: it; the member writes a lap's number before its barrier (see team.barrier).
+#: it; each barrier is given its lap's number (see team.barrier).
 (LAP_FORCES, LAP_INTEGRATE, LAP_KEYS, LAP_PLACE, LAP_SCATTER, LAP_QUERY, LAP_GRID, LAP_STALE, LAP_SEARCH,
  LAP_RESPOND, LAP_POSE, LAP_BOUNDS, LAP_COLLIDE, LAP_BANDS, LAP_CUTS, LAP_BOUND) = range(16)
 LAP_NAMES = ("springs and forces", "gather and Verlet", "hash: keys", "hash: slots placed", "hash: points placed",
@@ -134,9 +134,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         # whether this substep rebuilds the contact reference, and the member's parts of it
         stale = np.zeros(FLAG, np.int64)
     gen = np.int64(0)
-    # (a frame that is not timed writes nothing to the laps' slots: a line the members share)
-    timed = sync[TIMED] != 0
-    if member == 0 and timed:
+    if member == 0 and sync[TIMED] != 0:
         # a timed frame's first lap starts here, once the team is together (see team.barrier)
         sync[RELEASED] = monotonic_ns()
     for substep in range(steps):
@@ -149,9 +147,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             force_work(forces, pos, last, substep, w0, w1)
             if pins is not None:
                 offset_at(pins.times, pins.points, pins.velocity, substep_time(pins.clock, substep + 1, pins.dt), offset)
-            if timed:
-                sync[LAP] = LAP_FORCES
-            gen = barrier(sync, size, gen)
+            gen = barrier(sync, size, gen, np.int64(LAP_FORCES))
             if gen < 0:
                 return
             # a point's force is final once gathered, so its Verlet step follows at once
@@ -174,9 +170,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                         count_slots(spec.slots, hist[member], p0, p1)
             if col is not None:
                 member_bounds(pos, last, col.boxes, cols, lo, hi)
-            if timed:
-                sync[LAP] = LAP_INTEGRATE
-            gen = barrier(sync, size, gen)
+            gen = barrier(sync, size, gen, np.int64(LAP_INTEGRATE))
             if gen < 0:
                 return
         elif spec is not None:
@@ -184,9 +178,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 cell_keys(pos, spec.cell[0], spec.cell[1], spec.cell[2], spec.keys, spec.slots, table, own0, own1)
                 hist[member] = 0
                 count_slots(spec.slots, hist[member], own0, own1)
-                if timed:
-                    sync[LAP] = LAP_KEYS
-                gen = barrier(sync, size, gen)
+                gen = barrier(sync, size, gen, np.int64(LAP_KEYS))
                 if gen < 0:
                     return
         if spec is not None:
@@ -199,16 +191,12 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 # busy slots of all parts are shared out by estimated cost.
                 spec.tally[member, 0], spec.tally[member, 1] = place_slots(hist, cursor, spec.start, spec.busy,
                                                                            spec.cum, t0, t1)
-                if timed:
-                    sync[LAP] = LAP_PLACE
-                gen = barrier(sync, size, gen)
+                gen = barrier(sync, size, gen, np.int64(LAP_PLACE))
                 if gen < 0:
                     return
                 scatter_slots(pos, spec.keys, spec.slots, cursor[member], spec.order, spec.xs, spec.ys, spec.zs,
                               spec.ks, own0, own1)
-                if timed:
-                    sync[LAP] = LAP_SCATTER
-                gen = barrier(sync, size, gen)
+                gen = barrier(sync, size, gen, np.int64(LAP_SCATTER))
                 if gen < 0:
                     return
                 for r in range(size):
@@ -218,9 +206,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                         call_native(spec.repel, (pos, spec.movable, spec.dist, spec.sim_steps, spec.start, spec.order,
                                                  spec.busy, spec.xs, spec.ys, spec.zs, spec.ks, np.int64(r0 + i0),
                                                  np.int64(r0 + i1)))
-                if timed:
-                    sync[LAP] = LAP_QUERY
-                gen = barrier(sync, size, gen)
+                gen = barrier(sync, size, gen, np.int64(LAP_QUERY))
                 if gen < 0:
                     return
         if grid is not None:
@@ -228,9 +214,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 if member == 0:
                     grid_self_collide(pos, grid.free, grid.thickness, grid.sim_steps, grid.cell[0], grid.cell[1],
                                       grid.cell[2], grid.keys, grid.slots, grid.start, grid.order)
-                if timed:
-                    sync[LAP] = LAP_GRID
-                gen = barrier(sync, size, gen)
+                gen = barrier(sync, size, gen, np.int64(LAP_GRID))
                 if gen < 0:
                     return
         if contact is not None:
@@ -239,16 +223,12 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 # reference is searched by the whole team, each member its parts. Every member
                 # decides for itself, from the same arrays, before any moves a point.
                 call_native(st.calls[CALL_STALE], (pos, last, contact, stale, np.int64(member), np.int64(size)))
-                if timed:
-                    sync[LAP] = LAP_STALE
-                gen = barrier(sync, size, gen)
+                gen = barrier(sync, size, gen, np.int64(LAP_STALE))
                 if gen < 0:
                     return
                 if stale[STALE] != 0:
                     call_native(st.calls[CALL_SEARCH], (last, contact, stale, np.int64(member)))
-                    if timed:
-                        sync[LAP] = LAP_SEARCH
-                    gen = barrier(sync, size, gen)
+                    gen = barrier(sync, size, gen, np.int64(LAP_SEARCH))
                     if gen < 0:
                         return
                 if member == 0:
@@ -256,9 +236,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                         fall_back(stale)
                         call_native(st.calls[CALL_SEARCH], (last, contact, stale, np.int64(0)))
                     call_native(st.calls[CALL_RESPOND], (pos, last, contact, stale))
-                if timed:
-                    sync[LAP] = LAP_RESPOND
-                gen = barrier(sync, size, gen)
+                gen = barrier(sync, size, gen, np.int64(LAP_RESPOND))
                 if gen < 0:
                     return
         if col is not None:
@@ -266,9 +244,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 if posing:
                     if member == 0:
                         call_native(col.sets[SET_POSE], (colliders_at, col.calls, np.int64(substep), type_ref(None)))
-                    if timed:
-                        sync[LAP] = LAP_POSE
-                    gen = barrier(sync, size, gen)
+                    gen = barrier(sync, size, gen, np.int64(LAP_POSE))
                     if gen < 0:
                         return
                 lo, hi = share(CHUNKS, member, size)
@@ -277,9 +253,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 else:
                     # run on its own (profile): bound the positions as they are now
                     member_bounds(pos, last, col.boxes, cols, lo, hi)
-                    if timed:
-                        sync[LAP] = LAP_BOUNDS
-                    gen = barrier(sync, size, gen)
+                    gen = barrier(sync, size, gen, np.int64(LAP_BOUNDS))
                     if gen < 0:
                         return
                     merge_bounds(col.boxes, 0.0, box)
@@ -290,26 +264,20 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     raise MemoryError("the collider pass could not allocate its reach flags")
                 if member == 0:
                     st.skips[0] += skipped[0]
-                if timed:
-                    sync[LAP] = LAP_COLLIDE
-                gen = barrier(sync, size, gen)
+                gen = barrier(sync, size, gen, np.int64(LAP_COLLIDE))
                 if gen < 0:
                     return
         if provot_on:
             lo, hi = share(bands, member, size)
             call_native(st.calls[CALL_BANDS], (pos, st.pinned, st.blocks, st.rest, st.nw, st.stretch_limit,
                                                np.int64(lo), np.int64(hi), np.int64(bands)))
-            if timed:
-                sync[LAP] = LAP_BANDS
-            gen = barrier(sync, size, gen)
+            gen = barrier(sync, size, gen, np.int64(LAP_BANDS))
             if gen < 0:
                 return
             lo, hi = share(bands - 1, member, size)
             call_native(st.calls[CALL_CUTS], (pos, st.pinned, st.blocks, st.rest, st.nw, st.stretch_limit,
                                               np.int64(lo), np.int64(hi), np.int64(bands)))
-            if timed:
-                sync[LAP] = LAP_CUTS
-            gen = barrier(sync, size, gen)
+            gen = barrier(sync, size, gen, np.int64(LAP_CUTS))
             if gen < 0:
                 return
         if contact is not None:
@@ -317,9 +285,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             if passes & PASS_CONTACT != 0:
                 if member == 0:
                     call_native(st.calls[CALL_BOUND], (pos, contact))
-                if timed:
-                    sync[LAP] = LAP_BOUND
-                gen = barrier(sync, size, gen)
+                gen = barrier(sync, size, gen, np.int64(LAP_BOUND))
                 if gen < 0:
                     return
 
