@@ -135,7 +135,7 @@ def test_bundled_torus_is_what_the_generator_writes():
 # -- the grid against brute force -----------------------------------------------------------------
 def _without_planes(group):
     """The group with room for no separating plane: every listed point is decided by the tests."""
-    return group._replace(near_pl=np.zeros(group.near_pl.shape[:2] + (0, 4)))
+    return group._replace(near_pl=np.zeros(group.near_pl.shape[:2] + (0,) + group.near_pl.shape[3:]))
 
 
 @pytest.mark.xdist_group("mesh_targets")  # one worker compiles the brute-force query (5 s), not both
@@ -185,7 +185,7 @@ def test_each_points_list_holds_what_the_tests_need_and_its_planes_keep_the_thic
                   cloth=_cloth(30, thickness=thickness))
     group = mesh_group(load_scene(text))
     assert group.tris.shape[0] == 20000 and group.near_n.shape == (1, n)
-    lists = ("near_at", "near_n", "near_tris", "near_d", "near_ref", "near_pl")
+    lists = ("near_at", "near_n", "near_tris", "near_d", "near_ref", "near_first", "near_pl")
     rng = np.random.default_rng(3)
     last = _near_surface(group, rng, n, 2.0 * thickness)
     moved = held = checked = 0
@@ -253,6 +253,7 @@ def test_each_list_is_nearest_first_with_each_triangles_distance_from_where_it_w
             exact = [np.linalg.norm(ref - np.array(closest_on_triangle(*ref, *group.verts[group.tris[t]].reshape(-1))[:3]))
                      for t in tris]
             assert np.allclose(dist, np.array(exact) - slack, rtol=0.0, atol=1e-12)
+            assert group.near_first[0, p] == (dist[0] if k else np.inf)
             smooth = np.hypot(np.hypot(ref[0], ref[2]) - ring, ref[1]) - tube  # signed, the smooth torus's
             planes = group.near_pl[0, p, :min(k, NEAR_PLANES)]
             if smooth < -sag - 1e-4:  # surely inside the faces
@@ -516,9 +517,20 @@ def test_the_memory_check_counts_each_meshs_lists_per_point(tmp_path, monkeypatc
 
     mesh = {"path": "shape.obj", "translate": [0.5, 0.3, 0.5], "friction": 0.3}
     group = mesh_group(load_scene(_scene(tmp_path, torus_obj(*TORUS), mesh, cloth=_cloth(30))))
-    lists = (group.near_at, group.near_n, group.near_tris, group.near_d, group.near_ref, group.near_pl)
+    lists = (group.near_at, group.near_n, group.near_tris, group.near_d, group.near_ref, group.near_first,
+             group.near_pl)
     assert MESH_BYTES_PER_POINT >= 1.25 * sum(a.nbytes for a in lists) / 900
     monkeypatch.setattr(scene_module, "available_memory", lambda: 900 * BYTES_PER_POINT + 100)
     load_scene(_scene(tmp_path, torus_obj(*TORUS), None, cloth=_cloth(30)))  # fits without the mesh
     with pytest.raises(SceneError, match="30x30 grid would need about"):
         load_scene(_scene(tmp_path, torus_obj(*TORUS), mesh, cloth=_cloth(30)))
+
+
+def test_the_lists_rows_are_not_a_power_of_two_bytes_long():
+    # rows a power of two bytes apart fall in a fraction of the caches' sets, where two arrays can
+    # evict each other (docs/performance.md, "The lists' rows and the caches' sets")
+    group = mesh_group(load_scene("mesh"))
+    for rows in (group.near_d, group.near_pl):
+        stride = rows.strides[1]
+        assert stride & (stride - 1) != 0, rows.shape
+    assert np.array_equal(group.near_first, np.full(group.near_n.shape, np.inf))  # nothing listed yet

@@ -46,11 +46,20 @@ NEAR_ROOM = 64
 #: triangles go further down its list is handled by the exact tests; see
 #: :mod:`clothsim.sim.passes.colliders.mesh`).
 NEAR_PLANES = 16
+#: Numbers a row of a list's distances holds, and a separating plane: one more than used (the
+#: list's NEAR_ROOM distances; a plane's unit normal and offset), so that no row is a power of two
+#: bytes long. The pass reads the first entries of one point's row after another's; rows 512 B
+#: apart fall in one eighth of the caches' sets, and where a process's arrays happened to start
+#: at the same offset within those sets they evicted each other and the cloth's own arrays (see
+#: docs/performance.md, "The lists' rows and the caches' sets").
+NEAR_D_WIDTH = NEAR_ROOM + 1
+PLANE_WIDTH = 5
 #: Memory each mesh adds per cloth point, for the memory check: counted from the pass's arrays
-#: (the list's anchor and reference point, 2 x 3 x 8 B, its length, 8 B, per triangle its index
-#: and distance, 4 + 8 B, and per plane its normal and offset, 4 x 8 B), not measured, plus 25 % as
-#: for every figure of that check.
-MESH_BYTES_PER_POINT = int(1.25 * (2 * 3 * 8 + 8 + NEAR_ROOM * (4 + 8) + NEAR_PLANES * 4 * 8))
+#: (the list's anchor and reference point, 2 x 3 x 8 B, its length and its first distance, 2 x 8 B,
+#: its triangles, 4 B each, its row of distances, NEAR_D_WIDTH x 8 B, and its planes, PLANE_WIDTH
+#: x 8 B each), not measured, plus 25 % as for every figure of that check.
+MESH_BYTES_PER_POINT = int(1.25 * (2 * 3 * 8 + 2 * 8 + NEAR_ROOM * 4 + NEAR_D_WIDTH * 8
+                                   + NEAR_PLANES * PLANE_WIDTH * 8))
 
 
 @dataclass(frozen=True, eq=False)

@@ -384,6 +384,7 @@ def measure_list(mesh: tuple, m: int, p: int, count: int, qx: float, qy: float, 
                 planes[m, p, j, 3] = np.inf
     ref = mesh.near_ref
     ref[m, p, 0], ref[m, p, 1], ref[m, p, 2] = qx, qy, qz
+    mesh.near_first[m, p] = dist[m, p, 0] if count > 0 else np.inf
 
 
 @njit(inline="always", **EXACT)
@@ -543,7 +544,7 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
     near_n = mesh.near_n
     at = mesh.near_at
     ref = mesh.near_ref
-    dist = mesh.near_d
+    first = mesh.near_first
     listed = 0 if brute else near_n.shape[1]
     info = mesh.info
     x0, y0, z0 = info[m, INFO_LO], info[m, INFO_LO + 1], info[m, INFO_LO + 2]
@@ -566,7 +567,7 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
                 if near_n[m, p] == 0:
                     continue
                 fx, fy, fz = qx - ref[m, p, 0], qy - ref[m, p, 1], qz - ref[m, p, 2]
-                if dist[m, p, 0] > r1 + (abs(fx) + abs(fy) + abs(fz)) * _LONGER:
+                if first[m, p] > r1 + (abs(fx) + abs(fy) + abs(fz)) * _LONGER:
                     continue
         hit, ox, oy, oz = point_contact(mesh, m, p, lx, ly, lz, qx, qy, qz, brute)
         if hit:
@@ -660,7 +661,8 @@ def _untracked(g: MeshGroup) -> MeshGroup:
     # the mesh pass reads the poses, never the tracks: without them its type is the same for a
     # moving mesh and a fixed one, so both run one compiled pass
     return MeshGroup(g.verts, g.tris, g.tbox, g.fnorm, g.enorm, g.vnorm, g.info, g.dims, g.cell_start, g.cell_tris,
-                     g.cell_box, g.near_at, g.near_n, g.near_tris, g.near_d, g.near_ref, g.near_pl, g.pose,
+                     g.cell_box, g.near_at, g.near_n, g.near_tris, g.near_d, g.near_ref, g.near_first,
+                     g.near_pl, g.pose,
                      g.thickness, g.on, None, g.collide)
 
 

@@ -30,7 +30,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ....meshcollider import NEAR_PLANES, NEAR_ROOM
+from ....meshcollider import NEAR_D_WIDTH, NEAR_PLANES, NEAR_ROOM, PLANE_WIDTH
 from ....scene import Scene
 from ...clock import track_at
 from .moving import Tracks, pack_tracks
@@ -66,10 +66,12 @@ class MeshGroup(NamedTuple):
     near_at: np.ndarray  # (M, N, 3) each point's anchor, where its list of each mesh was gathered (mesh frame)
     near_n: np.ndarray  # (M, N) int64 triangles in that list; -1: none (too many, or never gathered)
     near_tris: np.ndarray  # (M, N, NEAR_ROOM) int32 the list: every triangle whose box comes within reach
-    near_d: np.ndarray  # (M, N, NEAR_ROOM) each listed triangle's distance from near_ref, less a slack; ascending
+    near_d: np.ndarray  # (M, N, NEAR_D_WIDTH) each listed triangle's distance from near_ref, less a slack; ascending
     near_ref: np.ndarray  # (M, N, 3) where those distances were measured (mesh frame)
-    near_pl: np.ndarray  # (M, N, NEAR_PLANES, 4) the first listed triangles' separating planes from near_ref:
-    # unit normal, offset (+inf: none)
+    near_first: np.ndarray  # (M, N) the first of each list's distances (+inf: none), which most points read
+    # every substep, side by side
+    near_pl: np.ndarray  # (M, N, NEAR_PLANES, PLANE_WIDTH) the first listed triangles' separating planes from
+    # near_ref: unit normal, offset (+inf: none), one unused
     pose: np.ndarray  # (M, 6) translation at the substep's start and at its end
     thickness: float
     on: np.ndarray  # (M,) bool: the reach flags
@@ -208,8 +210,9 @@ def mesh_group(scene: Scene, clock: np.ndarray | None = None, dt: float = 0.0) -
                      cell_tris, np.ascontiguousarray(tbox[cell_tris]), np.full((len(scene.meshes), n_points, 3), np.inf),
                      np.full((len(scene.meshes), n_points), -1, dtype=np.int64),
                      np.zeros((len(scene.meshes), n_points, NEAR_ROOM), dtype=np.int32),
-                     np.zeros((len(scene.meshes), n_points, NEAR_ROOM)), np.zeros((len(scene.meshes), n_points, 3)),
-                     np.zeros((len(scene.meshes), n_points, NEAR_PLANES, 4)),
+                     np.zeros((len(scene.meshes), n_points, NEAR_D_WIDTH)), np.zeros((len(scene.meshes), n_points, 3)),
+                     np.full((len(scene.meshes), n_points), np.inf),
+                     np.zeros((len(scene.meshes), n_points, NEAR_PLANES, PLANE_WIDTH)),
                      pose, float(thickness),
                      np.zeros(len(scene.meshes), dtype=np.bool_),
                      None if clock is None else pack_tracks(scene.meshes, clock, dt))
