@@ -256,6 +256,7 @@ def test_each_list_is_nearest_first_with_each_triangles_distance_from_where_it_w
             assert group.near_first[0, p] == (dist[0] if k else np.inf)
             smooth = np.hypot(np.hypot(ref[0], ref[2]) - ring, ref[1]) - tube  # signed, the smooth torus's
             planes = group.near_pl[0, p, :min(k, NEAR_PLANES)]
+            assert np.array_equal(planes[:, 4], dist[:planes.shape[0]])  # each plane's bound, copied to be read with it
             if smooth < -sag - 1e-4:  # surely inside the faces
                 assert np.all(planes[:, 3] == np.inf), p
                 sides_seen.add("inside")

@@ -46,13 +46,15 @@ NEAR_ROOM = 64
 #: triangles go further down its list is handled by the exact tests; see
 #: :mod:`clothsim.sim.passes.colliders.mesh`).
 NEAR_PLANES = 16
-#: Numbers a row of a list's distances holds, and a separating plane: one more than used (the
-#: list's NEAR_ROOM distances; a plane's unit normal and offset), so that no row is a power of two
-#: bytes long. The pass reads the first entries of one point's row after another's; rows 512 B
-#: apart fall in one eighth of the caches' sets, and where a process's arrays happened to start
-#: at the same offset within those sets they evicted each other and the cloth's own arrays (see
-#: docs/performance.md, "The lists' rows and the caches' sets").
+#: Numbers in a row of a list's distances: one more than the list holds, so that the row is not a
+#: power of two bytes long. The pass reads the first entries of one point's rows after another's;
+#: rows 512 B apart fall in one eighth of the caches' sets, and where a process's arrays happened to
+#: start at the same offset within those sets they evicted each other and the cloth's own arrays
+#: (see docs/performance.md, "The lists' rows and the caches' sets").
 NEAR_D_WIDTH = NEAR_ROOM + 1
+#: Numbers a separating plane takes in its row: unit normal, offset, and its triangle's distance
+#: (a copy of the list's, read in the same cache line as the plane it decides about); 40 B, so a
+#: row of planes is not a power of two bytes long either.
 PLANE_WIDTH = 5
 #: Memory each mesh adds per cloth point, for the memory check: counted from the pass's arrays
 #: (the list's anchor and reference point, 2 x 3 x 8 B, its length and its first distance, 2 x 8 B,

@@ -339,8 +339,9 @@ def _separating(verts: np.ndarray, a: int, b: int, c: int, dx: float, dy: float,
 def measure_list(mesh: tuple, m: int, p: int, count: int, qx: float, qy: float, qz: float) -> None:
     """Point ``p``'s list of mesh ``m`` (``count`` triangles) sorted nearest first from q, each
     triangle's distance from q, less the list's slack, in ``near_d[m, p]``, and the first
-    ``NEAR_PLANES`` triangles' separating planes from q in ``near_pl[m, p]`` (none when q is
-    inside a closed mesh); q becomes the list's reference, ``near_ref[m, p]``."""
+    ``NEAR_PLANES`` triangles' separating planes from q, each with that distance again, in
+    ``near_pl[m, p]`` (none when q is inside a closed mesh); q becomes the list's reference,
+    ``near_ref[m, p]``, and the first distance ``near_first[m, p]``."""
     # A triangle's distance from the reference bounds its distance from any later q from below
     # (less |q - reference|), so a substep reads the list only as far as that bound is within r.
     # The slack (the list's own, far beyond the rounding of either distance) keeps the bound
@@ -369,13 +370,14 @@ def measure_list(mesh: tuple, m: int, p: int, count: int, qx: float, qy: float, 
             dist[m, p, i] = dist[m, p, i - 1]
             near[m, p, i] = near[m, p, i - 1]
             if i < room:
-                for k in range(4):
+                for k in range(5):
                     planes[m, p, i, k] = planes[m, p, i - 1, k]
             i -= 1
         dist[m, p, i] = d
         near[m, p, i] = t
         if i < room:
             planes[m, p, i, 0], planes[m, p, i, 1], planes[m, p, i, 2], planes[m, p, i, 3] = nx, ny, nz, off
+            planes[m, p, i, 4] = d
     if bt >= 0 and mesh.dims[m, DIMS_CLOSED] != 0:
         # inside a closed mesh the planes would face inwards and hold the point there
         nx, ny, nz = pseudo_normal(mesh, bt, bf)
@@ -401,10 +403,13 @@ def _against_planes(mesh: tuple, m: int, p: int, count: int, within: float, lx: 
     ox, oy, oz = qx, qy, qz
     read = 0
     for j in range(count):
-        if dist[m, p, j] > within:
-            break
         if j == planes.shape[2]:
+            if dist[m, p, j] > within:
+                break
             return -1, qx, qy, qz
+        # the triangle's bound is read from its plane's row, in the same cache line
+        if planes[m, p, j, 4] > within:
+            break
         nx, ny, nz, off = planes[m, p, j, 0], planes[m, p, j, 1], planes[m, p, j, 2], planes[m, p, j, 3]
         if not nx * lx + ny * ly + nz * lz - off > 0.0:  # also no plane: offset +inf
             return -1, qx, qy, qz

@@ -71,7 +71,7 @@ class MeshGroup(NamedTuple):
     near_first: np.ndarray  # (M, N) the first of each list's distances (+inf: none), which most points read
     # every substep, side by side
     near_pl: np.ndarray  # (M, N, NEAR_PLANES, PLANE_WIDTH) the first listed triangles' separating planes from
-    # near_ref: unit normal, offset (+inf: none), one unused
+    # near_ref: unit normal, offset (+inf: none), and the triangle's near_d (read with the plane)
     pose: np.ndarray  # (M, 6) translation at the substep's start and at its end
     thickness: float
     on: np.ndarray  # (M,) bool: the reach flags
