@@ -171,6 +171,36 @@ def test_self_collision_matches_the_sequential_pass_at_every_cell_size(sizes):
     assert np.abs(pos - expected).max() < 1e-13
 
 
+def test_self_collision_never_takes_the_entry_past_a_slot_for_one_of_its_points():
+    """The query's sweep takes its slot's points two at a time, so a slot of an odd count reads the
+    entry past its end, which a parallel loop's other chunk may not have copied yet: zeros, with
+    the key of cell (0, 0, 0). A slot of five points in that cell, near the origin, queried with
+    nothing else copied, must move as the sequential pass moves them."""
+    from clothsim.sim.passes.selfcollide import build_map, copy_slots, repel_slots, slot_copies
+
+    rng = np.random.default_rng(11)
+    near_origin = rng.random((3, 5)) * 0.015 + 0.0005
+    elsewhere = rng.random((3, 40)) * 0.9 + rng.integers(1, 4, (3, 40))
+    pos = np.concatenate([near_origin, elsewhere], axis=1)
+    n = pos.shape[1]
+    thickness, steps = 0.01, 3
+    keys, slots, order = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, np.int64)
+    start = np.zeros(table_size(n) + 1, np.int64)
+    busy = np.empty(table_size(n), np.int64)
+    nb = build_map(pos, 1.0, 1.0, 1.0, keys, slots, start, order, busy)
+    b = [k for k in range(nb) if keys[order[start[busy[k]]]] == 0][0]
+    s0, s1 = start[busy[b]], start[busy[b] + 1]
+    assert s1 - s0 == 5 and s1 < n  # an odd slot, another slot's entry past it
+    expected = _spec_self_collision_reference(pos, np.arange(n), thickness, steps, 1.0)
+    xs, ys, zs, ks = slot_copies(n)
+    copy_slots(pos, keys, start, order, busy, xs, ys, zs, ks, b, b + 1)
+    assert ks[s1] == 0  # not copied: it reads as cell (0, 0, 0)
+    before = pos.copy()
+    repel_slots(pos, np.ones(n, np.bool_), 2.0 * thickness, steps, start, order, busy, xs, ys, zs, ks, b, b + 1)
+    assert (pos[:, :5] != before[:, :5]).any()  # the cell's own pairs do push
+    assert np.abs(pos[:, :5] - expected[:, :5]).max() < 1e-13
+
+
 def test_self_collision_sees_a_point_pushed_into_reach_earlier_in_the_pass():
     """Point 0 is pushed by point 1 towards point 2, which starts just out of reach (0.025 > 2
     thickness) and is within it once point 0 has moved: the in-place pass must push point 2 too."""

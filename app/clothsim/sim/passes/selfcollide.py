@@ -340,19 +340,20 @@ def _repel_slot(pos: np.ndarray, movable: np.ndarray, dist: float, dist2: float,
     n = points.shape[0]
     m = cx.shape[0]
     near[:m] = 0
-    for j in range(n):
-        xj = cx[j]
-        yj = cy[j]
-        zj = cz[j]
-        kj = ck[j]
+    # Two points j a sweep, so that each row of ``near`` is read and written once for both (the
+    # rows' loads and stores, not the tests, set the sweep's pace). For an odd n the second is the
+    # first entry past the slot, which may not have been copied yet (a parallel loop's chunks copy
+    # their slots side by side) and so may read as this slot's cell: its column is masked off.
+    valid = np.uint64(0xFFFFFFFFFFFFFFFF) >> np.uint64(64 - n)
+    for j in range(0, n, 2):
+        x0, y0, z0, k0 = cx[j], cy[j], cz[j], ck[j]
+        x1, y1, z1 = cx[j + 1], cy[j + 1], cz[j + 1]
+        k1 = ck[j + 1]
         for i in range(m):
-            dx = cx[i] - xj
-            dy = cy[i] - yj
-            dz = cz[i] - zj
-            d2 = dx * dx + dy * dy + dz * dz
-            # d2 > 0 also drops the point itself
-            hit = (ck[i] == kj) & (d2 < reach2) & (d2 > 0.0)
-            near[i] |= np.uint64(hit) << np.uint64(j)
+            xi, yi, zi, ki = cx[i], cy[i], cz[i], ck[i]
+            pair = _within(xi, yi, zi, ki, x0, y0, z0, k0, reach2) | (_within(xi, yi, zi, ki, x1, y1, z1, k1,
+                                                                              reach2) << _ONE)
+            near[i] |= (pair << np.uint64(j)) & valid
     for i in range(n):
         bits = near[i]
         p = points[i]
@@ -361,6 +362,18 @@ def _repel_slot(pos: np.ndarray, movable: np.ndarray, dist: float, dist2: float,
         count, sx, sy, sz = _push_marked(cx, cy, cz, bits, cx[i], cy[i], cz[i], dist, dist2)
         if count > 0:
             _move(pos, p, cx, cy, cz, i, sx, sy, sz, 1.0 / (count * steps))
+
+
+@njit(inline="always", **KERNEL)
+def _within(xi: float, yi: float, zi: float, ki: int, xj: float, yj: float, zj: float, kj: int,
+            reach2: float) -> np.uint64:
+    """1 when entry i is in entry j's cell and closer than sqrt(reach2), but not at its very
+    position (which also drops the point itself), else 0."""
+    dx = xi - xj
+    dy = yi - yj
+    dz = zi - zj
+    d2 = dx * dx + dy * dy + dz * dz
+    return np.uint64((ki == kj) & (d2 < reach2) & (d2 > 0.0))
 
 
 @njit(**KERNEL)
