@@ -15,7 +15,7 @@ from clothsim.meshcollider import NEAR_PLANES, rotation_matrix
 from clothsim.objfile import ObjError, parse_obj
 from clothsim.objshapes import TORUS, box_obj, torus_obj
 from clothsim.sim.passes.colliders.mesh import closest_on_triangle, mesh_targets
-from clothsim.sim.passes.colliders.meshgrid import INFO_NEAR, INFO_NEAR_OK, mesh_group
+from clothsim.sim.passes.colliders.meshgrid import INFO_NEAR, INFO_NEAR_OK, PLANE_D, mesh_group
 
 from conftest import SCENES, error_line
 
@@ -256,7 +256,7 @@ def test_each_list_is_nearest_first_with_each_triangles_distance_from_where_it_w
             assert group.near_first[0, p] == (dist[0] if k else np.inf)
             smooth = np.hypot(np.hypot(ref[0], ref[2]) - ring, ref[1]) - tube  # signed, the smooth torus's
             planes = group.near_pl[0, p, :min(k, NEAR_PLANES)]
-            assert np.array_equal(planes[:, 4], dist[:planes.shape[0]])  # each plane's bound, copied to be read with it
+            assert np.array_equal(planes[:, PLANE_D], dist[:planes.shape[0]])  # each plane's bound, copied to be read with it
             if smooth < -sag - 1e-4:  # surely inside the faces
                 assert np.all(planes[:, 3] == np.inf), p
                 sides_seen.add("inside")

@@ -86,7 +86,7 @@ from ....jit.internals import call_native, native_address
 from ...clock import substep_time
 from .moving import Tracks, track_ends
 from .meshgrid import MeshGroup, mesh_group, DIMS_CELL0, DIMS_CLOSED, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
-    INFO_HI, INFO_INV_H, INFO_LO, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK
+    INFO_HI, INFO_INV_H, INFO_LO, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK, PLANE_D
 from ...team import share
 
 #: How far (in thicknesses) a point may drift from where its list's distances and planes were
@@ -370,14 +370,14 @@ def measure_list(mesh: tuple, m: int, p: int, count: int, qx: float, qy: float, 
             dist[m, p, i] = dist[m, p, i - 1]
             near[m, p, i] = near[m, p, i - 1]
             if i < room:
-                for k in range(5):
+                for k in range(planes.shape[3]):
                     planes[m, p, i, k] = planes[m, p, i - 1, k]
             i -= 1
         dist[m, p, i] = d
         near[m, p, i] = t
         if i < room:
             planes[m, p, i, 0], planes[m, p, i, 1], planes[m, p, i, 2], planes[m, p, i, 3] = nx, ny, nz, off
-            planes[m, p, i, 4] = d
+            planes[m, p, i, PLANE_D] = d
     if bt >= 0 and mesh.dims[m, DIMS_CLOSED] != 0:
         # inside a closed mesh the planes would face inwards and hold the point there
         nx, ny, nz = pseudo_normal(mesh, bt, bf)
@@ -408,7 +408,7 @@ def _against_planes(mesh: tuple, m: int, p: int, count: int, within: float, lx: 
                 break
             return -1, qx, qy, qz
         # the triangle's bound is read from its plane's row, in the same cache line
-        if planes[m, p, j, 4] > within:
+        if planes[m, p, j, PLANE_D] > within:
             break
         nx, ny, nz, off = planes[m, p, j, 0], planes[m, p, j, 1], planes[m, p, j, 2], planes[m, p, j, 3]
         if not nx * lx + ny * ly + nz * lz - off > 0.0:  # also no plane: offset +inf

@@ -38,6 +38,8 @@ from .moving import Tracks, pack_tracks
 #: Columns of ``MeshGroup.info`` (float64) and ``MeshGroup.dims`` (int64), one row per mesh.
 INFO_LO, INFO_HI, INFO_INV_H, INFO_FRICTION, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK = 0, 3, 6, 7, 8, 9, 10
 DIMS_TRI0, DIMS_TRI1, DIMS_CELL0, DIMS_N, DIMS_CLOSED = 0, 1, 2, 3, 6
+#: Where a plane of ``MeshGroup.near_pl`` keeps its triangle's distance (after its normal and offset).
+PLANE_D = 4
 #: Most cells per triangle the grid may have (see the module's docstring).
 MAX_CELLS_PER_TRIANGLE = 8
 #: How much wider (relative to the margin plus the mesh's size) a triangle's listing is than the
