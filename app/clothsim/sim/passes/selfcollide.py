@@ -435,13 +435,7 @@ def _repel_window(wx: np.ndarray, wy: np.ndarray, wz: np.ndarray, wk: np.ndarray
     """
     bits = np.uint64(0)
     for j in range(wx.shape[0]):
-        dx = px - wx[j]
-        dy = py - wy[j]
-        dz = pz - wz[j]
-        d2 = dx * dx + dy * dy + dz * dz
-        # d2 > 0 also drops the point itself
-        hit = (wk[j] == key) & (d2 < dist2) & (d2 > 0.0)
-        bits |= np.uint64(hit) << np.uint64(j)
+        bits |= _within(wx[j], wy[j], wz[j], wk[j], px, py, pz, key, dist2) << np.uint64(j)
     return _push_marked(wx, wy, wz, bits, px, py, pz, dist, dist2)
 
 
