@@ -42,8 +42,8 @@ SELF_COLLISION_MODES = ("spec", "grid", "off", "contact")
 BYTES_PER_POINT = 1024
 BYTES_PER_POINT_OTHER_INTEGRATORS = 1728
 # What the contact self-collision mode adds a point, counted from its arrays' sizes (not
-# measured by tracemalloc: the search's tables are Numba's), plus 25 % as above: its group, 2,791-
-# 2,801 B from 20x20 to 256x256 (pair arrays for 16 pairs of each kind a point, 1,920 B; the
+# measured by tracemalloc: the search's tables are Numba's), plus 25 % as above: its group, 2,814-
+# 2,828 B from 20x20 to 256x256 (pair arrays for 16 pairs of each kind a point, 1,920 B; the
 # reference, the balls, the points' and elements' cells), and for each member of the thread team
 # searching a rebuild, that search's tables (the elements' boxes, their grids' runs and entries,
 # the boxes copied in table order): 618 B on the folded 20x20 cloth, counted as 1,024 B since a

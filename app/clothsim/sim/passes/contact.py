@@ -289,7 +289,8 @@ def _keep_pt(c: Contact, p: int, t: int, wa: float, wb: float, wc: float, nx: fl
 @njit(inline="always", **EXACT)
 def _point_triangle(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray, npt: int, end: int) -> int:
     """Test one point-triangle pair; returns the pairs kept (npt, or npt + 1; see :func:`_keep_pt`).
-    (The rebuild tests its pairs in batches, :func:`_triangles_batch`, with the same bits.)"""
+    (Rebuilds and moves test their pairs in batches, :func:`_triangles_batch`, with the same bits:
+    this is the one-pair form the tests hold them to.)"""
     tris = c.tris
     a, b, cc = tris[0, t], tris[1, t], tris[2, t]
     if p == a or p == b or p == cc:
@@ -332,9 +333,9 @@ def _keep_ee(c: Contact, e1: int, e2: int, u: float, v: float, nx: float, ny: fl
 
 @njit(inline="always", **EXACT)
 def _edge_edge(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, nee: int, end: int) -> int:
-    """Test one edge-edge pair; returns the pairs kept (see :func:`_keep_pt`). (The rebuild tests
-    its pairs in batches, :func:`_segments_batch`, with the same bits; this one takes the pairs
-    with an edge of no length.)"""
+    """Test one edge-edge pair; returns the pairs kept (see :func:`_keep_pt`). (Rebuilds and moves
+    test their pairs in batches, :func:`_segments_batch`, with the same bits; this one takes the
+    pairs with an edge of no length.)"""
     edges = c.edges
     p1, q1 = edges[0, e1], edges[1, e1]
     p2, q2 = edges[0, e2], edges[1, e2]
@@ -529,6 +530,22 @@ def _settle_pt(c: Contact, pairs: np.ndarray, out: np.ndarray, n: int, dmin: np.
     return npt
 
 
+@njit(**BORROWED)
+def _tested_pt(c: Contact, xin: np.ndarray, out: np.ndarray, pairs: np.ndarray, n: int, dmin: np.ndarray, npt: int,
+               end: int) -> int:
+    # a batch of point-triangle pairs tested and taken in order (as rebuilds and moves test them)
+    _triangles_batch(xin, out, n)
+    return _settle_pt(c, pairs, out, n, dmin, npt, end)
+
+
+@njit(**BORROWED)
+def _tested_ee(x: np.ndarray, c: Contact, xin: np.ndarray, out: np.ndarray, pairs: np.ndarray, n: int,
+               dmin: np.ndarray, nee: int, end: int) -> int:
+    # (as _tested_pt, for edge-edge pairs)
+    _segments_batch(xin, out, n)
+    return _settle_ee(x, c, pairs, out, n, dmin, nee, end)
+
+
 @njit(**KERNEL)
 def _element_boxes(x: np.ndarray, ids: np.ndarray, pad: float) -> np.ndarray:
     """(6, K) boxes (lo, hi) of the elements whose corners are the columns of ``ids`` (k, K),
@@ -624,12 +641,10 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
                 nb = _add_pair(xin, pairs, nb, x, p, a, b, cc, p, t)
                 cost += TEST_COST
                 if nb == BATCH:
-                    _triangles_batch(xin, out, nb)
-                    npt = _settle_pt(c, pairs, out, nb, dmin, npt, pt_end)
+                    npt = _tested_pt(c, xin, out, pairs, nb, dmin, npt, pt_end)
                     nb = 0
         if nb > 0:
-            _triangles_batch(xin, out, nb)
-            npt = _settle_pt(c, pairs, out, nb, dmin, npt, pt_end)
+            npt = _tested_pt(c, xin, out, pairs, nb, dmin, npt, pt_end)
         # edge-edge: each edge once, in its lower corner's cell (cells as large as the largest box);
         # the cells an overlapping box can start in read column by column, each one run
         ee_first, ee_end = share(c.ee.shape[1], part, parts)
@@ -670,12 +685,10 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
                 nb = _add_pair(xin, pairs, nb, x, p1, q1, p2, q2, a, b)
                 cost += TEST_COST
                 if nb == BATCH:
-                    _segments_batch(xin, out, nb)
-                    nee = _settle_ee(x, c, pairs, out, nb, dmin, nee, ee_end)
+                    nee = _tested_ee(x, c, xin, out, pairs, nb, dmin, nee, ee_end)
                     nb = 0
         if nb > 0:
-            _segments_batch(xin, out, nb)
-            nee = _settle_ee(x, c, pairs, out, nb, dmin, nee, ee_end)
+            nee = _tested_ee(x, c, xin, out, pairs, nb, dmin, nee, ee_end)
         c.found[part, 0] = npt - pt_first
         c.found[part, 1] = nee - ee_first
         c.cost[part] = cost
@@ -910,11 +923,12 @@ def rereference(pos: np.ndarray, last: np.ndarray, c: Contact) -> bool:
     reference is joined to ``last``, which has no crossing, by paths that keep every pair apart,
     so it has none either, and the argument of the module's docstring holds from it.
     """
-    return _rereference(pos, last, c, c.dmins[0])
+    batch = (np.empty(12 * BATCH), np.empty(7 * BATCH), np.empty(2 * BATCH, dtype=np.int64))
+    return _rereference(pos, last, c, c.dmins[0], batch)
 
 
 @njit(**BORROWED)
-def _rereference(pos: np.ndarray, last: np.ndarray, c: Contact, dmin: np.ndarray) -> bool:
+def _rereference(pos: np.ndarray, last: np.ndarray, c: Contact, dmin: np.ndarray, batch: tuple) -> bool:
     nb = c.near
     roomy = (ROOMY * GAMMA * c.radius) ** 2
     nb.count[0] += 1
@@ -940,7 +954,7 @@ def _rereference(pos: np.ndarray, last: np.ndarray, c: Contact, dmin: np.ndarray
         nee = _drop_ee(c, nee, now)
         for p in range(dmin.shape[0]):
             dmin[p] = c.radius
-        npt, nee = _round_pairs(c, done, k, now, dmin, npt, nee)
+        npt, nee = _round_pairs(c, done, k, now, dmin, npt, nee, batch)
         # (pairs beyond the arrays' room are counted, as a rebuild counts them)
         c.meta[DROPPED] += max(npt - cap_pt, 0) + max(nee - cap_ee, 0)
         npt = min(npt, cap_pt)
@@ -1021,38 +1035,33 @@ def _keep(ids: np.ndarray, data: np.ndarray, k: int, kept: int) -> int:
     return kept + 1
 
 
-@njit(**BORROWED)
-def _one_pt(x: np.ndarray, c: Contact, p: int, t: int, dmin: np.ndarray, npt: int, end: int) -> int:
-    # (the exact tests compiled once here and called, not inlined at each place that tests a pair:
-    # inlined three times, they made the moves' search the longest compile of a cold start)
-    return _point_triangle(x, c, p, t, dmin, npt, end)
-
-
-@njit(**BORROWED)
-def _one_ee(x: np.ndarray, c: Contact, e1: int, e2: int, dmin: np.ndarray, nee: int, end: int) -> int:
-    return _edge_edge(x, c, e1, e2, dmin, nee, end)
-
-
 @njit(inline="always", **EXACT)
-def _inside(box: np.ndarray, e: int, x: float, y: float, z: float) -> bool:
-    return box[0, e] <= x <= box[3, e] and box[1, e] <= y <= box[4, e] and box[2, e] <= z <= box[5, e]
-
-
-@njit(inline="always", **EXACT)
-def _overlap(box: np.ndarray, a: int, b: int) -> bool:
-    return not (box[0, b] > box[3, a] or box[3, b] < box[0, a] or box[1, b] > box[4, a] or box[4, b] < box[1, a]
-                or box[2, b] > box[5, a] or box[5, b] < box[2, a])
+def _union(box: np.ndarray, ids: np.ndarray, first: int, end: int, mark: np.ndarray, now: int) -> tuple:
+    """The union (lower, then upper corner) of the boxes of the elements ``ids[first:end]`` marked
+    ``now``; its lower corner is +inf when none is."""
+    lox = loy = loz = np.inf
+    hix = hiy = hiz = -np.inf
+    for j in range(first, end):
+        e = ids[j]
+        if mark[e] == now:
+            lox, loy, loz = min(lox, box[0, e]), min(loy, box[1, e]), min(loz, box[2, e])
+            hix, hiy, hiz = max(hix, box[3, e]), max(hiy, box[4, e]), max(hiz, box[5, e])
+    return lox, loy, loz, hix, hiy, hiz
 
 
 @njit(**BORROWED)
-def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: int, nee: int) -> tuple[int, int]:
+def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: int, nee: int,
+                 batch: tuple) -> tuple[int, int]:
     # every pair the round's points (todo[lo:hi]) belong to, with the boxes and the exact tests
     # of a rebuild: each moved point against the triangles whose box holds it; each triangle a
     # moved point belongs to against the points in its box that did not move; each edge a moved
     # point belongs to against the edges whose boxes overlap its own (a pair of two such edges
-    # once). The elements are found by their boxes' lower corners (see nearby.py), each once.
+    # once). The elements are found by their boxes' lower corners (see nearby.py), each once. The
+    # pairs are tested BATCH at a time, in the order found, as a rebuild tests them.
     nb = c.near
     x = c.ref
+    tris = c.tris
+    edges = c.edges
     hits = nb.hits
     cell = nb.cell
     end_pt = c.pt.shape[1]
@@ -1061,41 +1070,103 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
     ebox = nb.edge_box
     text = nb.ext[0]
     eext = nb.ext[1]
+    xin, out, pairs = batch
+    k = np.int64(0)
     for i in range(lo, hi):
         p = nb.todo[i]
         px, py, pz = x[0, p], x[1, p], x[2, p]
         found = listed_in(nb.tris, hits, cell, px - text, py - text, pz - text, px, py, pz)
+        kept = np.int64(0)
         for j in range(found):
             t = hits[j]
-            if _inside(tbox, t, px, py, pz):
-                npt = _one_pt(x, c, p, t, dmin, npt, end_pt)
+            hits[kept] = t
+            kept += ((tris[0, t] != p) & (tris[1, t] != p) & (tris[2, t] != p) & (tbox[0, t] <= px)
+                     & (px <= tbox[3, t]) & (tbox[1, t] <= py) & (py <= tbox[4, t]) & (tbox[2, t] <= pz)
+                     & (pz <= tbox[5, t]))
+        for j in range(kept):
+            t = hits[j]
+            k = _add_pair(xin, pairs, k, x, p, tris[0, t], tris[1, t], tris[2, t], p, t)
+            if k == BATCH:
+                npt = _tested_pt(c, xin, out, pairs, k, dmin, npt, end_pt)
+                k = 0
+    # A moved point's triangles (and edges) are read against what one query of the union of their
+    # boxes lists, kept where it is inside (overlaps) that union: an item inside (overlapping) one
+    # element's box lies in that element's own query cells, which the union's query reads in the
+    # same order (cell by cell, each cell's list in its order), so each element meets its items in
+    # the order its own query gives. Each element then picks its own from the few kept, without
+    # branches (as a rebuild reads its cells).
+    picked = nb.picked
     for i in range(lo, hi):
         p = nb.todo[i]
+        ulx, uly, ulz, uhx, uhy, uhz = _union(tbox, nb.tri_ids, nb.tri_at[p], nb.tri_at[p + 1], nb.tri_mark, now)
+        if ulx > uhx:
+            continue
+        found = listed_in(nb.points, hits, cell, ulx, uly, ulz, uhx, uhy, uhz)
+        m = np.int64(0)
+        for j in range(found):
+            q = hits[j]
+            hits[m] = q
+            m += ((x[0, q] >= ulx) & (x[0, q] <= uhx) & (x[1, q] >= uly) & (x[1, q] <= uhy) & (x[2, q] >= ulz)
+                  & (x[2, q] <= uhz))
         for j in range(nb.tri_at[p], nb.tri_at[p + 1]):
             t = nb.tri_ids[j]
             if nb.tri_mark[t] != now:
                 continue
             nb.tri_mark[t] = -now  # (tested once)
-            found = listed_in(nb.points, hits, cell, tbox[0, t], tbox[1, t], tbox[2, t], tbox[3, t], tbox[4, t],
-                              tbox[5, t])
-            for jj in range(found):
+            a, b, cc = tris[0, t], tris[1, t], tris[2, t]
+            lx, ly, lz, hx, hy, hz = tbox[0, t], tbox[1, t], tbox[2, t], tbox[3, t], tbox[4, t], tbox[5, t]
+            kept = np.int64(0)
+            for jj in range(m):
                 q = hits[jj]
-                if nb.mark[1, q] != now and _inside(tbox, t, x[0, q], x[1, q], x[2, q]):
-                    npt = _one_pt(x, c, q, t, dmin, npt, end_pt)
+                picked[kept] = q
+                kept += ((nb.mark[1, q] != now) & (q != a) & (q != b) & (q != cc) & (x[0, q] >= lx) & (x[0, q] <= hx)
+                         & (x[1, q] >= ly) & (x[1, q] <= hy) & (x[2, q] >= lz) & (x[2, q] <= hz))
+            for jj in range(kept):
+                k = _add_pair(xin, pairs, k, x, picked[jj], a, b, cc, picked[jj], t)
+                if k == BATCH:
+                    npt = _tested_pt(c, xin, out, pairs, k, dmin, npt, end_pt)
+                    k = 0
+    if k > 0:
+        npt = _tested_pt(c, xin, out, pairs, k, dmin, npt, end_pt)
+        k = 0
     for i in range(lo, hi):
         p = nb.todo[i]
+        ulx, uly, ulz, uhx, uhy, uhz = _union(ebox, nb.edge_ids, nb.edge_at[p], nb.edge_at[p + 1], nb.edge_mark, now)
+        if ulx > uhx:
+            continue
+        found = listed_in(nb.edges, hits, cell, ulx - eext, uly - eext, ulz - eext, uhx, uhy, uhz)
+        m = np.int64(0)
+        for j in range(found):
+            e2 = hits[j]
+            hits[m] = e2
+            m += ~((ebox[0, e2] > uhx) | (ebox[3, e2] < ulx) | (ebox[1, e2] > uhy) | (ebox[4, e2] < uly)
+                   | (ebox[2, e2] > uhz) | (ebox[5, e2] < ulz))
         for j in range(nb.edge_at[p], nb.edge_at[p + 1]):
             e = nb.edge_ids[j]
             if nb.edge_mark[e] != now:
                 continue
             nb.edge_mark[e] = -now  # (tested once)
-            found = listed_in(nb.edges, hits, cell, ebox[0, e] - eext, ebox[1, e] - eext, ebox[2, e] - eext,
-                              ebox[3, e], ebox[4, e], ebox[5, e])
-            for jj in range(found):
+            lx, ly, lz, hx, hy, hz = ebox[0, e], ebox[1, e], ebox[2, e], ebox[3, e], ebox[4, e], ebox[5, e]
+            kept = np.int64(0)
+            for jj in range(m):
                 e2 = hits[jj]
-                if e2 == e or (abs(nb.edge_mark[e2]) == now and e2 < e) or not _overlap(ebox, e, e2):
+                picked[kept] = e2
+                # (a pair of two edges of the round's points once, from the lower)
+                kept += ((e2 != e) & ((abs(nb.edge_mark[e2]) != now) | (e2 > e))
+                         & ~((ebox[0, e2] > hx) | (ebox[3, e2] < lx) | (ebox[1, e2] > hy) | (ebox[4, e2] < ly)
+                             | (ebox[2, e2] > hz) | (ebox[5, e2] < lz)))
+            for jj in range(kept):
+                f1, f2 = min(e, picked[jj]), max(e, picked[jj])  # (a pair stored lower edge first)
+                p1, q1 = edges[0, f1], edges[1, f1]
+                p2, q2 = edges[0, f2], edges[1, f2]
+                if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
                     continue
-                nee = _one_ee(x, c, min(e, e2), max(e, e2), dmin, nee, end_ee)
+                k = _add_pair(xin, pairs, k, x, p1, q1, p2, q2, f1, f2)
+                if k == BATCH:
+                    nee = _tested_ee(x, c, xin, out, pairs, k, dmin, nee, end_ee)
+                    k = 0
+    if k > 0:
+        nee = _tested_ee(x, c, xin, out, pairs, k, dmin, nee, end_ee)
     return npt, nee
 
 

@@ -42,7 +42,9 @@ class Nearby(NamedTuple):
     moved since their reference was set, ``mark`` (2, N) / ``tri_mark`` (T,) / ``edge_mark`` (E,)
     stamps (the points being moved in this re-reference, or in this round; the elements they
     belong to), ``todo`` (N,) the points to move, ``count`` (1,) the last stamp given, ``hits``
-    the items a query found. ``cell`` is the cells' edge."""
+    the items a query found (``picked`` those an element takes of them), and a batch of pairs to
+    test (``rows``, ``results``, ``pairs``: see
+    :func:`~clothsim.sim.passes.contact.search`). ``cell`` is the cells' edge."""
 
     points: Cells
     tris: Cells
@@ -61,6 +63,7 @@ class Nearby(NamedTuple):
     todo: np.ndarray
     count: np.ndarray
     hits: np.ndarray
+    picked: np.ndarray
     cell: float
 
 
@@ -91,7 +94,8 @@ def nearby_index(n: int, tris: np.ndarray, edges: np.ndarray, cell: float) -> Ne
     return Nearby(_cells(n), _cells(t), _cells(e), np.zeros((6, t)), np.zeros((6, e)), np.zeros(2), tri_at, tri_ids,
                   edge_at, edge_ids, np.zeros(n, dtype=np.bool_), np.zeros((2, n), dtype=np.int64),
                   np.zeros(t, dtype=np.int64), np.zeros(e, dtype=np.int64), np.zeros(n, dtype=np.int64),
-                  np.zeros(1, dtype=np.int64), np.zeros(max(n, t, e), dtype=np.int64), cell)
+                  np.zeros(1, dtype=np.int64), np.zeros(max(n, t, e), dtype=np.int64),
+                  np.zeros(max(n, t, e), dtype=np.int64), cell)
 
 
 @njit(inline="always", **KERNEL)
