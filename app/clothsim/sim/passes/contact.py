@@ -398,6 +398,21 @@ def _add_pair(rows: np.ndarray, pairs: np.ndarray, k: int, x: np.ndarray, i0: in
 _S, _T, _N, _D, _DEG = 0, 1, 2, 5, 6
 
 
+class Batch(NamedTuple):
+    """Pairs tested together: ``rows`` (12 flat rows, ``BATCH`` long) their four points,
+    ``results`` (7 such rows) what the tests give, ``pairs`` (2 rows) the two elements of each."""
+
+    rows: np.ndarray
+    results: np.ndarray
+    pairs: np.ndarray
+
+
+@njit(**EXACT)
+def new_batch() -> Batch:
+    """An empty :class:`Batch`."""
+    return Batch(np.empty(12 * BATCH), np.empty(7 * BATCH), np.empty(2 * BATCH, dtype=np.int64))
+
+
 @njit(**BORROWED)
 def _segments_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
     """:func:`closest_on_segments` and the distance of each of the first ``n`` pairs of a batch,
@@ -531,19 +546,17 @@ def _settle_pt(c: Contact, pairs: np.ndarray, out: np.ndarray, n: int, dmin: np.
 
 
 @njit(**BORROWED)
-def _tested_pt(c: Contact, xin: np.ndarray, out: np.ndarray, pairs: np.ndarray, n: int, dmin: np.ndarray, npt: int,
-               end: int) -> int:
+def _tested_pt(c: Contact, batch: Batch, n: int, dmin: np.ndarray, npt: int, end: int) -> int:
     # a batch of point-triangle pairs tested and taken in order (as rebuilds and moves test them)
-    _triangles_batch(xin, out, n)
-    return _settle_pt(c, pairs, out, n, dmin, npt, end)
+    _triangles_batch(batch.rows, batch.results, n)
+    return _settle_pt(c, batch.pairs, batch.results, n, dmin, npt, end)
 
 
 @njit(**BORROWED)
-def _tested_ee(x: np.ndarray, c: Contact, xin: np.ndarray, out: np.ndarray, pairs: np.ndarray, n: int,
-               dmin: np.ndarray, nee: int, end: int) -> int:
+def _tested_ee(x: np.ndarray, c: Contact, batch: Batch, n: int, dmin: np.ndarray, nee: int, end: int) -> int:
     # (as _tested_pt, for edge-edge pairs)
-    _segments_batch(xin, out, n)
-    return _settle_ee(x, c, pairs, out, n, dmin, nee, end)
+    _segments_batch(batch.rows, batch.results, n)
+    return _settle_ee(x, c, batch.pairs, batch.results, n, dmin, nee, end)
 
 
 @njit(**KERNEL)
@@ -581,9 +594,7 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
     radius = c.radius
     tris = c.tris
     edges = c.edges
-    xin = np.empty(12 * BATCH)
-    out = np.empty(7 * BATCH)
-    pairs = np.empty(2 * BATCH, dtype=np.int64)
+    batch = new_batch()
     hit = np.empty(max(c.tris.shape[1], c.edges.shape[1]), dtype=np.int64)
     # the tables, once for the parts this call runs
     tbox = _element_boxes(x, c.tris, radius)
@@ -638,13 +649,13 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
                 a, b, cc = tris[0, t], tris[1, t], tris[2, t]
                 if p == a or p == b or p == cc:
                     continue
-                nb = _add_pair(xin, pairs, nb, x, p, a, b, cc, p, t)
+                nb = _add_pair(batch.rows, batch.pairs, nb, x, p, a, b, cc, p, t)
                 cost += TEST_COST
                 if nb == BATCH:
-                    npt = _tested_pt(c, xin, out, pairs, nb, dmin, npt, pt_end)
+                    npt = _tested_pt(c, batch, nb, dmin, npt, pt_end)
                     nb = 0
         if nb > 0:
-            npt = _tested_pt(c, xin, out, pairs, nb, dmin, npt, pt_end)
+            npt = _tested_pt(c, batch, nb, dmin, npt, pt_end)
         # edge-edge: each edge once, in its lower corner's cell (cells as large as the largest box);
         # the cells an overlapping box can start in read column by column, each one run
         ee_first, ee_end = share(c.ee.shape[1], part, parts)
@@ -682,13 +693,13 @@ def search(x: np.ndarray, c: Contact, lo: int, hi: int, parts: int, row: int) ->
                 p2, q2 = edges[0, b], edges[1, b]
                 if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
                     continue
-                nb = _add_pair(xin, pairs, nb, x, p1, q1, p2, q2, a, b)
+                nb = _add_pair(batch.rows, batch.pairs, nb, x, p1, q1, p2, q2, a, b)
                 cost += TEST_COST
                 if nb == BATCH:
-                    nee = _tested_ee(x, c, xin, out, pairs, nb, dmin, nee, ee_end)
+                    nee = _tested_ee(x, c, batch, nb, dmin, nee, ee_end)
                     nb = 0
         if nb > 0:
-            nee = _tested_ee(x, c, xin, out, pairs, nb, dmin, nee, ee_end)
+            nee = _tested_ee(x, c, batch, nb, dmin, nee, ee_end)
         c.found[part, 0] = npt - pt_first
         c.found[part, 1] = nee - ee_first
         c.cost[part] = cost
@@ -923,12 +934,11 @@ def rereference(pos: np.ndarray, last: np.ndarray, c: Contact) -> bool:
     reference is joined to ``last``, which has no crossing, by paths that keep every pair apart,
     so it has none either, and the argument of the module's docstring holds from it.
     """
-    batch = (np.empty(12 * BATCH), np.empty(7 * BATCH), np.empty(2 * BATCH, dtype=np.int64))
-    return _rereference(pos, last, c, c.dmins[0], batch)
+    return _rereference(pos, last, c, c.dmins[0], new_batch())
 
 
 @njit(**BORROWED)
-def _rereference(pos: np.ndarray, last: np.ndarray, c: Contact, dmin: np.ndarray, batch: tuple) -> bool:
+def _rereference(pos: np.ndarray, last: np.ndarray, c: Contact, dmin: np.ndarray, batch: Batch) -> bool:
     nb = c.near
     roomy = (ROOMY * GAMMA * c.radius) ** 2
     nb.count[0] += 1
@@ -1051,7 +1061,7 @@ def _union(box: np.ndarray, ids: np.ndarray, first: int, end: int, mark: np.ndar
 
 @njit(**BORROWED)
 def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: int, nee: int,
-                 batch: tuple) -> tuple[int, int]:
+                 batch: Batch) -> tuple[int, int]:
     # every pair the round's points (todo[lo:hi]) belong to, with the boxes and the exact tests
     # of a rebuild: each moved point against the triangles whose box holds it; each triangle a
     # moved point belongs to against the points in its box that did not move; each edge a moved
@@ -1070,7 +1080,6 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
     ebox = nb.edge_box
     text = nb.ext[0]
     eext = nb.ext[1]
-    xin, out, pairs = batch
     k = np.int64(0)
     for i in range(lo, hi):
         p = nb.todo[i]
@@ -1085,9 +1094,9 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
                      & (pz <= tbox[5, t]))
         for j in range(kept):
             t = hits[j]
-            k = _add_pair(xin, pairs, k, x, p, tris[0, t], tris[1, t], tris[2, t], p, t)
+            k = _add_pair(batch.rows, batch.pairs, k, x, p, tris[0, t], tris[1, t], tris[2, t], p, t)
             if k == BATCH:
-                npt = _tested_pt(c, xin, out, pairs, k, dmin, npt, end_pt)
+                npt = _tested_pt(c, batch, k, dmin, npt, end_pt)
                 k = 0
     # A moved point's triangles (and edges) are read against what one query of the union of their
     # boxes lists, kept where it is inside (overlaps) that union: an item inside (overlapping) one
@@ -1122,12 +1131,12 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
                 kept += ((nb.mark[1, q] != now) & (q != a) & (q != b) & (q != cc) & (x[0, q] >= lx) & (x[0, q] <= hx)
                          & (x[1, q] >= ly) & (x[1, q] <= hy) & (x[2, q] >= lz) & (x[2, q] <= hz))
             for jj in range(kept):
-                k = _add_pair(xin, pairs, k, x, picked[jj], a, b, cc, picked[jj], t)
+                k = _add_pair(batch.rows, batch.pairs, k, x, picked[jj], a, b, cc, picked[jj], t)
                 if k == BATCH:
-                    npt = _tested_pt(c, xin, out, pairs, k, dmin, npt, end_pt)
+                    npt = _tested_pt(c, batch, k, dmin, npt, end_pt)
                     k = 0
     if k > 0:
-        npt = _tested_pt(c, xin, out, pairs, k, dmin, npt, end_pt)
+        npt = _tested_pt(c, batch, k, dmin, npt, end_pt)
         k = 0
     for i in range(lo, hi):
         p = nb.todo[i]
@@ -1161,12 +1170,12 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
                 p2, q2 = edges[0, f2], edges[1, f2]
                 if p1 == p2 or p1 == q2 or q1 == p2 or q1 == q2:
                     continue
-                k = _add_pair(xin, pairs, k, x, p1, q1, p2, q2, f1, f2)
+                k = _add_pair(batch.rows, batch.pairs, k, x, p1, q1, p2, q2, f1, f2)
                 if k == BATCH:
-                    nee = _tested_ee(x, c, xin, out, pairs, k, dmin, nee, end_ee)
+                    nee = _tested_ee(x, c, batch, k, dmin, nee, end_ee)
                     k = 0
     if k > 0:
-        nee = _tested_ee(x, c, xin, out, pairs, k, dmin, nee, end_ee)
+        nee = _tested_ee(x, c, batch, k, dmin, nee, end_ee)
     return npt, nee
 
 
