@@ -42,9 +42,8 @@ class Nearby(NamedTuple):
     moved since their reference was set, ``mark`` (2, N) / ``tri_mark`` (T,) / ``edge_mark`` (E,)
     stamps (the points being moved in this re-reference, or in this round; the elements they
     belong to), ``todo`` (N,) the points to move, ``count`` (1,) the last stamp given, ``hits``
-    the items a query found (``picked`` those an element takes of them), and a batch of pairs to
-    test (``rows``, ``results``, ``pairs``: see
-    :func:`~clothsim.sim.passes.contact.search`). ``cell`` is the cells' edge."""
+    the items a query found and ``picked`` those an element takes of them. ``cell`` is the cells'
+    edge."""
 
     points: Cells
     tris: Cells
