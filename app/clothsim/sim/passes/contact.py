@@ -1046,6 +1046,20 @@ def _keep(ids: np.ndarray, data: np.ndarray, k: int, kept: int) -> int:
 
 
 @njit(inline="always", **EXACT)
+def _holds(lx: float, ly: float, lz: float, hx: float, hy: float, hz: float, x: float, y: float, z: float) -> bool:
+    """Whether the box (lower, upper corner) holds the point (x, y, z), edges included; without
+    branches, so that a loop that counts with it is vectorised."""
+    return (x >= lx) & (x <= hx) & (y >= ly) & (y <= hy) & (z >= lz) & (z <= hz)
+
+
+@njit(inline="always", **EXACT)
+def _meets(box: np.ndarray, e: int, lx: float, ly: float, lz: float, hx: float, hy: float, hz: float) -> bool:
+    """Whether box ``e`` of ``box`` (6, M) overlaps the box (lower, upper corner), without branches."""
+    return ~((box[0, e] > hx) | (box[3, e] < lx) | (box[1, e] > hy) | (box[4, e] < ly) | (box[2, e] > hz)
+             | (box[5, e] < lz))
+
+
+@njit(inline="always", **EXACT)
 def _union(box: np.ndarray, ids: np.ndarray, first: int, end: int, mark: np.ndarray, now: int) -> tuple:
     """The union (lower, then upper corner) of the boxes of the elements ``ids[first:end]`` marked
     ``now``; its lower corner is +inf when none is."""
@@ -1089,9 +1103,8 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
         for j in range(found):
             t = hits[j]
             hits[kept] = t
-            kept += ((tris[0, t] != p) & (tris[1, t] != p) & (tris[2, t] != p) & (tbox[0, t] <= px)
-                     & (px <= tbox[3, t]) & (tbox[1, t] <= py) & (py <= tbox[4, t]) & (tbox[2, t] <= pz)
-                     & (pz <= tbox[5, t]))
+            kept += ((tris[0, t] != p) & (tris[1, t] != p) & (tris[2, t] != p)
+                     & _holds(tbox[0, t], tbox[1, t], tbox[2, t], tbox[3, t], tbox[4, t], tbox[5, t], px, py, pz))
         for j in range(kept):
             t = hits[j]
             k = _add_pair(batch.rows, batch.pairs, k, x, p, tris[0, t], tris[1, t], tris[2, t], p, t)
@@ -1115,8 +1128,7 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
         for j in range(found):
             q = hits[j]
             hits[m] = q
-            m += ((x[0, q] >= ulx) & (x[0, q] <= uhx) & (x[1, q] >= uly) & (x[1, q] <= uhy) & (x[2, q] >= ulz)
-                  & (x[2, q] <= uhz))
+            m += _holds(ulx, uly, ulz, uhx, uhy, uhz, x[0, q], x[1, q], x[2, q])
         for j in range(nb.tri_at[p], nb.tri_at[p + 1]):
             t = nb.tri_ids[j]
             if nb.tri_mark[t] != now:
@@ -1128,8 +1140,8 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
             for jj in range(m):
                 q = hits[jj]
                 picked[kept] = q
-                kept += ((nb.mark[1, q] != now) & (q != a) & (q != b) & (q != cc) & (x[0, q] >= lx) & (x[0, q] <= hx)
-                         & (x[1, q] >= ly) & (x[1, q] <= hy) & (x[2, q] >= lz) & (x[2, q] <= hz))
+                kept += ((nb.mark[1, q] != now) & (q != a) & (q != b) & (q != cc)
+                         & _holds(lx, ly, lz, hx, hy, hz, x[0, q], x[1, q], x[2, q]))
             for jj in range(kept):
                 k = _add_pair(batch.rows, batch.pairs, k, x, picked[jj], a, b, cc, picked[jj], t)
                 if k == BATCH:
@@ -1148,8 +1160,7 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
         for j in range(found):
             e2 = hits[j]
             hits[m] = e2
-            m += ~((ebox[0, e2] > uhx) | (ebox[3, e2] < ulx) | (ebox[1, e2] > uhy) | (ebox[4, e2] < uly)
-                   | (ebox[2, e2] > uhz) | (ebox[5, e2] < ulz))
+            m += _meets(ebox, e2, ulx, uly, ulz, uhx, uhy, uhz)
         for j in range(nb.edge_at[p], nb.edge_at[p + 1]):
             e = nb.edge_ids[j]
             if nb.edge_mark[e] != now:
@@ -1162,8 +1173,7 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
                 picked[kept] = e2
                 # (a pair of two edges of the round's points once, from the lower)
                 kept += ((e2 != e) & ((abs(nb.edge_mark[e2]) != now) | (e2 > e))
-                         & ~((ebox[0, e2] > hx) | (ebox[3, e2] < lx) | (ebox[1, e2] > hy) | (ebox[4, e2] < ly)
-                             | (ebox[2, e2] > hz) | (ebox[5, e2] < lz)))
+                         & _meets(ebox, e2, lx, ly, lz, hx, hy, hz))
             for jj in range(kept):
                 f1, f2 = min(e, picked[jj]), max(e, picked[jj])  # (a pair stored lower edge first)
                 p1, q1 = edges[0, f1], edges[1, f1]
