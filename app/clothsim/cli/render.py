@@ -199,6 +199,7 @@ def run_render(args: argparse.Namespace) -> int:
     rest = None if args.no_rest else RestDetector(scene.simulation.rest_tolerance, scene.simulation.rest_frames)
     if rest is not None:
         rest.update(sim._pos)
+    renderer.prepare(scene, settings.shader)
     stats = ClipStats()
     render_s = 0.0
     counts = {"rendered": 0, "reused": 0}

@@ -23,7 +23,7 @@ from typing import Any
 from .internals import cache_folder, is_cached
 
 __all__ = ["JOBS_VARIABLE", "available_cores", "compile_elsewhere", "compiling_alone", "on_warm",
-           "warm_side_kernels"]
+           "side_kernels_beside", "warm_side_kernels"]
 
 #: Set to 1 to compile everything in this process (no second process on a cold start).
 JOBS_VARIABLE = "CLOTHSIM_COMPILE_JOBS"
@@ -31,6 +31,7 @@ _CHILD = ("import importlib, pickle, sys\nfor module, name, argtypes in pickle.l
           "getattr(importlib.import_module(module), name).compile(argtypes)")
 
 _WARMERS: dict[str, Callable[[], None]] = {}
+_BESIDE: dict[str, tuple[tuple[Any, tuple], ...]] = {}
 
 
 def available_cores() -> int:
@@ -41,17 +42,30 @@ def available_cores() -> int:
         return os.cpu_count() or 1
 
 
-def on_warm(name: str, warm: Callable[[], None]) -> None:
+def on_warm(name: str, warm: Callable[[], None], beside: tuple[tuple[Any, tuple], ...] = ()) -> None:
     """Register ``warm`` (compiles or loads a small kernel with the argument types it will get)
-    under ``name``, to run in :func:`warm_side_kernels`; a module registers its own when imported."""
+    under ``name``, to run in :func:`warm_side_kernels`; a module registers its own when imported.
+    ``beside``: the (dispatcher, argtypes) ``warm`` compiles, where a cold start may compile them
+    in its second process instead (:func:`side_kernels_beside`)."""
     _WARMERS[name] = warm
+    if beside:
+        _BESIDE[name] = beside
 
 
-def warm_side_kernels() -> None:
+def side_kernels_beside() -> tuple[tuple[Any, tuple], ...]:
+    """The registered side kernels a cold start compiles in its second process (see
+    :func:`compile_elsewhere`'s ``also``): those whose warm-up would otherwise add to the first
+    process's share."""
+    return tuple(kernel for name in sorted(_BESIDE) for kernel in _BESIDE[name])
+
+
+def warm_side_kernels(but_beside: bool = False) -> None:
     """Compile (or load) the small kernels registered with :func:`on_warm`, in name order: the
-    blow-up guard, the rest detector and (once the renderer is imported) its mesh kernel."""
+    blow-up guard, the rest detector and (once the renderer is imported) its kernels; with
+    ``but_beside``, not those the second process of a cold start is compiling."""
     for name in sorted(_WARMERS):
-        _WARMERS[name]()
+        if not (but_beside and name in _BESIDE):
+            _WARMERS[name]()
 
 
 def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], None],

@@ -60,6 +60,15 @@ class Programs:
             self._cache[look] = prog
         return prog
 
+    def places_as_given(self, look: str) -> bool:
+        """True if ``look``'s vertex stage puts each vertex where the model and view-projection
+        matrices say (the shared ``mesh.vert``, not replaced), so the CPU knows where it lands."""
+        vertex = LOOKS[look][0]
+        if vertex != "mesh.vert":
+            return False
+        replaced = self._sources.get(look)
+        return replaced is None or replaced[0] == read_source(vertex)
+
     def release(self) -> None:
         for prog in self._cache.values():
             prog.release()

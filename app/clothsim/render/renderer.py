@@ -21,6 +21,7 @@ from ..colliders import KINDS
 from ..scene import Scene, available_memory
 from ..sim.passes.colliders.moving import posed, shift
 from . import mesh, textures
+from .overlap import covers_once, register_warm
 from .camera import FLIP_Y, Camera, default_position, default_target
 from .context import create_context
 from .programs import Programs, set_matrix, set_uniform
@@ -117,7 +118,8 @@ class Renderer:
         try:
             self.samples = max(0, min(int(samples), int(self.ctx.max_samples)))
             self._check_size()
-            self._ms_color, self._ms_depth, self._ms_fbo, self._color, self._fbo = self._framebuffers()
+            (self._ms_color, self._ms_depth, self._ms_fbo, self._ms_color_fbo, self._color,
+             self._fbo) = self._framebuffers()
             self.programs = Programs(self.ctx, sources)
         except BaseException:
             # Nobody holds this Renderer yet, so nobody else can release what it made: a caller
@@ -184,6 +186,14 @@ class Renderer:
         from .channels import draw_channels
 
         return draw_channels(self, simulation, view, next_positions)
+
+    def prepare(self, scene: Scene, look: str) -> None:
+        """Get ready to draw ``scene`` with ``look`` in a clip: a scene that draws the cloth alone
+        has its frames tested for overlap (overlap.py), whose kernel is then compiled (or loaded)
+        with the other side kernels, before a clip's simulation thread starts and, on a cold
+        start, beside the simulation's first plan. (Without this, the first frame compiles it.)"""
+        if self._alone(scene, look):
+            register_warm()
 
     def settings_for(self, scene: Scene) -> RenderSettings:
         """The scene's render settings (validated once per scene object)."""
@@ -255,7 +265,7 @@ class Renderer:
                                   f"{_gib(need)} of memory for its framebuffers and image, more than the "
                                   f"{_gib(avail)} available; use a smaller size or fewer samples")
 
-    def _framebuffers(self) -> tuple[Any, Any, Any, Any, Any]:
+    def _framebuffers(self) -> tuple[Any, Any, Any, Any, Any, Any]:
         import moderngl
 
         size = (self.width, self.height)
@@ -264,8 +274,9 @@ class Renderer:
             made.append(self.ctx.renderbuffer(size, 4, samples=self.samples))
             made.append(self.ctx.depth_renderbuffer(size, samples=self.samples))
             made.append(self.ctx.framebuffer(made[0], made[1]))
+            made.append(self.ctx.framebuffer(made[0]))  # the same colour, no depth (overlap.py)
             made.append(self.ctx.renderbuffer(size, 4))
-            made.append(self.ctx.framebuffer(made[3]))
+            made.append(self.ctx.framebuffer(made[4]))
         except moderngl.Error as exc:
             # Drivers have limits of their own beyond the ones GL reports.
             gl = str(self.ctx.info.get("GL_RENDERER", "this OpenGL driver"))
@@ -275,7 +286,7 @@ class Renderer:
                 why = "it refused: " + " ".join(str(exc).split())
             raise RenderSizeError(f"image size {self.width}x{self.height} with {self._aa()} is more than "
                                   f"{gl} can allocate ({why}); use a smaller size or fewer samples") from None
-        return made[0], made[1], made[2], made[3], made[4]
+        return made[0], made[1], made[2], made[3], made[4], made[5]
 
     def _release_framebuffers(self) -> None:
         while self._framebuffer_objects:
@@ -414,17 +425,23 @@ class Renderer:
         import moderngl
 
         ctx = self.ctx
-        self._ms_fbo.use()
+        cam = camera if camera is not None else self.camera(sim, settings)
+        view_projection = self._view_projection(cam)
+        # A frame whose image covers no sample twice draws the same bytes without the depth test
+        # and its buffer (see overlap.py).
+        once = self._alone(sim.scene, look) and covers_once(buffers.vertices, sim.nw, sim.nh, view_projection,
+                                                            self.width, self.height)
+        target = self._ms_color_fbo if once else self._ms_fbo
+        target.use()
         ctx.viewport = (0, 0, self.width, self.height)
-        ctx.enable_only(moderngl.DEPTH_TEST)
+        ctx.enable_only(moderngl.NOTHING if once else moderngl.DEPTH_TEST)
         ctx.front_face = "cw"  # the y flip turns counter-clockwise triangles clockwise
         ctx.wireframe = False
         bg = settings.background
         ctx.clear(bg[0], bg[1], bg[2], 1.0, depth=1.0)  # the framebuffer holds sRGB values
 
-        cam = camera if camera is not None else self.camera(sim, settings)
         prog = self.programs.get(look)
-        self._set_common_uniforms(prog, look, cam, settings)
+        self._set_common_uniforms(prog, look, cam, settings, view_projection)
         ident = np.eye(4)
 
         if look == "wireframe":
@@ -447,7 +464,11 @@ class Renderer:
         # The driver draws in the call that first needs the pixels; wait here, without the GIL,
         # rather than inside moderngl's resolve.
         self._finish()
-        ctx.copy_framebuffer(self._fbo, self._ms_fbo)  # resolves the multisampled image
+        ctx.copy_framebuffer(self._fbo, target)  # resolves the multisampled image
+
+    def _alone(self, scene: Scene, look: str) -> bool:
+        """Whether ``look`` draws ``scene``'s cloth alone (no collider), where the CPU knows it."""
+        return self.programs.places_as_given(look) and not any(getattr(scene, k.attr) for k in KINDS)
 
     def _draw_colliders(self, prog: Any, look: str, sim: ClothState, settings: RenderSettings,
                         mark: Callable[[int], None] | None = None) -> None:
@@ -569,10 +590,14 @@ class Renderer:
             total = sum(c for _, _, c in self._spring_ranges)
             vao.render(moderngl.LINES, vertices=total, first=0)
 
-    def _set_common_uniforms(self, prog: Any, look: str, cam: Camera, settings: RenderSettings) -> None:
+    def _view_projection(self, cam: Camera) -> np.ndarray:
         # Rendered upside down (clip-space y negated, winding flipped to match in _draw), so
         # the framebuffer's bottom-up rows read back as a top-down image with no copy.
-        set_matrix(prog, "u_view_projection", FLIP_Y @ cam.view_projection(self.width / self.height))
+        return FLIP_Y @ cam.view_projection(self.width / self.height)
+
+    def _set_common_uniforms(self, prog: Any, look: str, cam: Camera, settings: RenderSettings,
+                             view_projection: np.ndarray) -> None:
+        set_matrix(prog, "u_view_projection", view_projection)
         set_uniform(prog, "u_cam_pos", tuple(float(c) for c in cam.position))
         set_uniform(prog, "u_light_pos", settings.light_position)
         set_uniform(prog, "u_light_intensity", settings.light_intensity)

@@ -292,7 +292,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
 
 @lru_cache(maxsize=None)
 def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
-    from ...jit.compile import compile_elsewhere, compiling_alone, warm_side_kernels
+    from ...jit.compile import compile_elsewhere, compiling_alone, side_kernels_beside, warm_side_kernels
     from .. import guard, rest  # noqa: F401 - they register their kernels' warm-up on import
 
     # argtypes = (member, size, steps, *the Plan's groups, sync, passes)
@@ -341,9 +341,10 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
                    (contact_search, (last, groups.contact, flag, i64)))
 
     # A cold start's two processes: the second compiles the member (5-9 s cold) and the mesh
-    # pass (8-9 s) or else the set's two kernels (3 s), this one the rest (the kinds' passes
-    # 3-6 s, the shared passes, the launchers, the side kernels).
-    beside = ((collide_meshes_chunk, collide),) if collide is not None else sets
+    # pass (8-9 s) or else the set's two kernels (3 s), and the side kernels registered to go
+    # beside (the renderer's overlap test); this one the rest (the kinds' passes 3-6 s, the
+    # shared passes, the launchers, the other side kernels).
+    beside = (*(((collide_meshes_chunk, collide),) if collide is not None else sets), *side_kernels_beside())
     here = (*(contact or ()), *(kernel for row in kinds for kernel in row), *(sets if collide is not None else ()))
 
     def meanwhile() -> None:
@@ -354,10 +355,11 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
             repel_slots.compile(repel)
         _enter.compile(enter)
         _launch.compile(launch)
-        warm_side_kernels()
+        warm_side_kernels(but_beside=True)
 
     with compiling_alone(_member, member):
         compile_elsewhere(_member, member, meanwhile, beside)
+        warm_side_kernels()  # those compiled beside, loaded from the cache
         # (compiled here, on one core or when the second process failed)
         calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0,) * 4))
         return Addresses(native_address(_member, member),
