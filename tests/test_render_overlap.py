@@ -205,3 +205,15 @@ def test_a_scene_with_a_collider_keeps_the_depth_test(renderers, monkeypatch):
     renderers[1].render(sim, "phong")
     renderers[1].render(Simulation(load_scene("pinned2")), "wireframe")
     assert asked == []
+
+
+def test_only_looks_whose_vertex_stage_leaves_the_positions_are_tested():
+    from clothsim.render.programs import Programs, read_source
+
+    plain = Programs(None)
+    assert plain.places_as_given("phong") and plain.places_as_given("mirror")
+    assert not any(plain.places_as_given(look) for look in ("wireframe", "displacement", "custom"))
+    vertex = read_source("mesh.vert")
+    assert Programs(None, {"phong": (vertex, "a fragment stage")}).places_as_given("phong")
+    moved = vertex.replace("gl_Position = ", "gl_Position = 0.5 * ")
+    assert moved != vertex and not Programs(None, {"phong": (moved, "a fragment stage")}).places_as_given("phong")

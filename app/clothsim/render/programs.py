@@ -46,6 +46,7 @@ class Programs:
         self.ctx = ctx
         self._sources = dict(sources or {})
         self._cache: dict[str, Any] = {}
+        self._as_given: dict[str, bool] = {}
 
     def get(self, look: str) -> Any:
         """The compiled program of ``look``."""
@@ -63,11 +64,13 @@ class Programs:
     def places_as_given(self, look: str) -> bool:
         """True if ``look``'s vertex stage puts each vertex where the model and view-projection
         matrices say (the shared ``mesh.vert``, not replaced), so the CPU knows where it lands."""
-        vertex = LOOKS[look][0]
-        if vertex != "mesh.vert":
-            return False
-        replaced = self._sources.get(look)
-        return replaced is None or replaced[0] == read_source(vertex)
+        known = self._as_given.get(look)
+        if known is None:
+            vertex = LOOKS[look][0]
+            replaced = self._sources.get(look)
+            known = vertex == "mesh.vert" and (replaced is None or replaced[0] == read_source(vertex))
+            self._as_given[look] = known
+        return known
 
     def release(self) -> None:
         for prog in self._cache.values():
