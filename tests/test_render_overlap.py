@@ -1,6 +1,7 @@
 """Frames drawn without the depth test where the cloth's image covers no sample twice
-(clothsim.render.overlap): the test that decides it, against a brute-force overlap check, and the
-images, which must be the bytes the depth test gives."""
+(clothsim.render.overlap) and lies in front of the scene's one plane, if any: the test that
+decides it, against a brute-force overlap check, and the images, which must be the bytes the
+depth test gives."""
 
 from __future__ import annotations
 
@@ -156,15 +157,16 @@ def renderers():
         r.release()
 
 
+@pytest.mark.parametrize("scene_name", ["pinned2", "plane"])
 @pytest.mark.parametrize("look", ["phong", "texture", "mirror"])
-def test_frames_drawn_without_the_depth_test_are_the_bytes_drawn_with_it(renderers, monkeypatch, look):
-    from clothsim.render import renderer as renderer_module
+def test_frames_drawn_without_the_depth_test_are_the_bytes_drawn_with_it(renderers, monkeypatch, scene_name, look):
     from clothsim.render.camera import Camera
     from clothsim.render.pipeline import Snapshot
+    from clothsim.render.renderer import Renderer
     from clothsim.scene import load_scene
     from clothsim.sim.simulation import Simulation
 
-    sim = Simulation(load_scene("pinned2"))
+    sim = Simulation(load_scene(scene_name))
     states = []
     for frame in range(90):
         sim.step(1)
@@ -172,26 +174,48 @@ def test_frames_drawn_without_the_depth_test_are_the_bytes_drawn_with_it(rendere
             states.append(Snapshot.of(sim))
     rng = np.random.default_rng(3)
     answers: list[bool] = []
-    real = renderer_module.covers_once
+    real = Renderer._without_depth
 
-    def recorded(*args):
-        answers.append(bool(real(*args)))
+    def recorded(self, *args):
+        answers.append(bool(real(self, *args)))
         return answers[-1]
 
     plain, skipping = renderers
     settings = plain.settings_for(states[0].scene)
     for k, state in enumerate(states):
         camera = None
-        if k % 2:  # and from anywhere around it, near and far
+        if k % 2:  # and from anywhere around it, near and far (below the plane too)
             centre = state.positions.mean(axis=0)
             away = rng.normal(size=3)
             camera = Camera(centre + away / np.linalg.norm(away) * rng.uniform(0.5, 5.0), centre, 40.0, 0.01, 100.0)
-        monkeypatch.setattr(renderer_module, "covers_once", lambda *args: False)
+        monkeypatch.setattr(Renderer, "_without_depth", lambda self, *args: False)
         with_depth = plain.render(state, look, settings, camera=camera)
-        monkeypatch.setattr(renderer_module, "covers_once", recorded)
+        monkeypatch.setattr(Renderer, "_without_depth", recorded)
         without = skipping.render(state, look, settings, camera=camera)
         assert np.array_equal(with_depth, without), f"frame {k}: {int((with_depth != without).any(-1).sum())} pixels"
     assert len(answers) == len(states) and sum(answers) >= len(states) // 3, answers
+
+
+def test_a_camera_beyond_the_plane_keeps_the_depth_test(renderers, monkeypatch):
+    # From below the floor the plane hides the cloth: drawn after it without the test, the
+    # cloth would show (its texture differs from the plane's).
+    from clothsim.render import renderer as renderer_module
+    from clothsim.render.camera import Camera
+    from clothsim.scene import load_scene
+    from clothsim.sim.simulation import Simulation
+
+    sim = Simulation(load_scene("plane"))
+    sim.step(60)
+    centre = sim.positions.mean(axis=0)
+    below = Camera(centre + np.array([0.3, -1.5, 0.4]), centre, 40.0, 0.01, 100.0)
+    above = Camera(centre + np.array([0.3, 1.5, 0.4]), centre, 40.0, 0.01, 100.0)
+    asked: list[int] = []
+    real = renderer_module.covers_once
+    monkeypatch.setattr(renderer_module, "covers_once", lambda *args: asked.append(1) or real(*args))
+    renderers[1].render(sim, "texture", camera=below)
+    assert asked == []  # answered no before the overlap test
+    renderers[1].render(sim, "texture", camera=above)
+    assert asked == [1]
 
 
 def test_a_scene_with_a_collider_keeps_the_depth_test(renderers, monkeypatch):
@@ -201,8 +225,8 @@ def test_a_scene_with_a_collider_keeps_the_depth_test(renderers, monkeypatch):
 
     asked: list[int] = []
     monkeypatch.setattr(renderer_module, "covers_once", lambda *args: asked.append(1) or True)
-    sim = Simulation(load_scene("sphere"))
-    renderers[1].render(sim, "phong")
+    renderers[1].render(Simulation(load_scene("sphere")), "phong")
+    renderers[1].render(Simulation(load_scene("tablecloth")), "phong")  # a plane and a box
     renderers[1].render(Simulation(load_scene("pinned2")), "wireframe")
     assert asked == []
 

@@ -36,6 +36,9 @@ if TYPE_CHECKING:
 GL_SRGB8_ALPHA8 = 0x8C43
 # Texture units, fixed per sampler so that binding order never matters.
 UNIT_COLOR, UNIT_HEIGHT, UNIT_CUBE = 0, 1, 2
+# How far (scene units) every corner of the cloth must be on the camera's side of a plane for
+# a frame to be drawn without the depth test: far above float32's rounding of the plane's quad.
+PLANE_MARGIN = 1e-5
 # The course draws its sphere a little smaller than the collider so that the cloth, which
 # rests exactly on the collider's surface, is not pierced by the sphere's flat facets.
 SPHERE_DRAW_SCALE = 0.92
@@ -189,10 +192,10 @@ class Renderer:
 
     def prepare(self, scene: Scene, look: str) -> None:
         """Get ready to draw ``scene`` with ``look`` in a clip: a scene that draws the cloth alone
-        has its frames tested for overlap (overlap.py), whose kernel is then compiled (or loaded)
+        or over one plane has its frames tested for overlap (overlap.py), whose kernel is then compiled (or loaded)
         with the other side kernels, before a clip's simulation thread starts and, on a cold
         start, beside the simulation's first plan. (Without this, the first frame compiles it.)"""
-        if self._alone(scene, look):
+        if self._in_order(scene, look):
             register_warm()
 
     def settings_for(self, scene: Scene) -> RenderSettings:
@@ -429,8 +432,7 @@ class Renderer:
         view_projection = self._view_projection(cam)
         # A frame whose image covers no sample twice draws the same bytes without the depth test
         # and its buffer (see overlap.py).
-        once = self._alone(sim.scene, look) and covers_once(buffers.vertices, sim.nw, sim.nh, view_projection,
-                                                            self.width, self.height)
+        once = self._without_depth(sim, look, buffers, cam, view_projection)
         target = self._ms_color_fbo if once else self._ms_fbo
         target.use()
         ctx.viewport = (0, 0, self.width, self.height)
@@ -444,6 +446,8 @@ class Renderer:
         self._set_common_uniforms(prog, look, cam, settings, view_projection)
         ident = np.eye(4)
 
+        if once:  # a plane, if any, first: the cloth is in front of it (see _without_depth)
+            self._draw_colliders(prog, look, sim, settings)
         if look == "wireframe":
             self._draw_wireframe(prog, sim, settings, buffers)
         else:
@@ -459,16 +463,42 @@ class Renderer:
             ctx.wireframe = True
             dim = tuple(0.45 * c for c in srgb_to_linear(settings.color))
             set_uniform(prog, "u_color", (*dim, 1.0))
-        self._draw_colliders(prog, look, sim, settings)
+        if not once:
+            self._draw_colliders(prog, look, sim, settings)
         ctx.wireframe = False
         # The driver draws in the call that first needs the pixels; wait here, without the GIL,
         # rather than inside moderngl's resolve.
         self._finish()
         ctx.copy_framebuffer(self._fbo, target)  # resolves the multisampled image
 
-    def _alone(self, scene: Scene, look: str) -> bool:
-        """Whether ``look`` draws ``scene``'s cloth alone (no collider), where the CPU knows it."""
-        return self.programs.places_as_given(look) and not any(getattr(scene, k.attr) for k in KINDS)
+    def _in_order(self, scene: Scene, look: str) -> bool:
+        """Whether ``look`` may draw ``scene`` without the depth test, frame by frame
+        (:meth:`_without_depth`): its vertex stage leaves the positions where they are (the CPU
+        knows where they land) and the scene draws the cloth alone or over one plane."""
+        if not self.programs.places_as_given(look):
+            return False
+        drawn = [kind.key for kind in KINDS for _ in getattr(scene, kind.attr)]
+        return drawn in ([], ["plane"])
+
+    def _without_depth(self, sim: ClothState, look: str, buffers: _ClothBuffers, cam: Camera,
+                       view_projection: np.ndarray) -> bool:
+        """Whether this frame's image is the same without the depth test: no sample covered twice
+        by the cloth (overlap.py) and, with a plane, the camera and every drawn corner of the
+        cloth on the same side of it, so that the cloth drawn after the plane hides what it
+        would hide with the test (the plane is pushed back in depth besides)."""
+        scene = sim.scene
+        if not self._in_order(scene, look):
+            return False
+        for plane in scene.planes:
+            normal = np.asarray(plane.normal, dtype=np.float64)
+            now = float(getattr(sim, "time", 0.0))
+            base = float(normal @ (np.asarray(plane.point, dtype=np.float64) + shift(plane, now)))
+            side = float(normal @ cam.position) - base
+            heights = (buffers.vertices[:, :3].astype(np.float64) @ normal - base) * np.sign(side)
+            # (the plane's quad is drawn from float32 corners: a margin far above their rounding)
+            if not heights.min() > PLANE_MARGIN * float(np.linalg.norm(normal)):
+                return False
+        return bool(covers_once(buffers.vertices, sim.nw, sim.nh, view_projection, self.width, self.height))
 
     def _draw_colliders(self, prog: Any, look: str, sim: ClothState, settings: RenderSettings,
                         mark: Callable[[int], None] | None = None) -> None:
