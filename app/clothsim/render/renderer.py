@@ -21,9 +21,9 @@ from ..colliders import KINDS
 from ..scene import Scene, available_memory
 from ..sim.passes.colliders.moving import posed, shift
 from . import mesh, textures
-from .overlap import covers_once, register_warm
 from .camera import FLIP_Y, Camera, default_position, default_target
 from .context import create_context
+from .overlap import covers_once, register_warm
 from .programs import Programs, set_matrix, set_uniform
 from .settings import (SHADERS, USES_COLOR_TEXTURE, USES_CUBEMAP, USES_HEIGHT_MAP, USES_TANGENTS,
                        RenderSettings, srgb_to_linear)
@@ -192,9 +192,10 @@ class Renderer:
 
     def prepare(self, scene: Scene, look: str) -> None:
         """Get ready to draw ``scene`` with ``look`` in a clip: a scene that draws the cloth alone
-        or over one plane has its frames tested for overlap (overlap.py), whose kernel is then compiled (or loaded)
-        with the other side kernels, before a clip's simulation thread starts and, on a cold
-        start, beside the simulation's first plan. (Without this, the first frame compiles it.)"""
+        or over one plane has its frames tested for overlap (overlap.py), whose kernel is then
+        compiled (or loaded) with the other side kernels, before a clip's simulation thread
+        starts and, on a cold start, beside the simulation's first plan. (Without this, the
+        first frame compiles it.)"""
         if self._in_order(scene, look):
             register_warm()
 
@@ -430,8 +431,8 @@ class Renderer:
         ctx = self.ctx
         cam = camera if camera is not None else self.camera(sim, settings)
         view_projection = self._view_projection(cam)
-        # A frame whose image covers no sample twice draws the same bytes without the depth test
-        # and its buffer (see overlap.py).
+        # A frame whose image covers no sample twice, and whose cloth is in front of its plane if
+        # it has one, draws the same bytes without the depth test and its buffer.
         once = self._without_depth(sim, look, buffers, cam, view_projection)
         target = self._ms_color_fbo if once else self._ms_fbo
         target.use()
@@ -495,7 +496,6 @@ class Renderer:
             base = float(normal @ (np.asarray(plane.point, dtype=np.float64) + shift(plane, now)))
             side = float(normal @ cam.position) - base
             heights = (buffers.vertices[:, :3].astype(np.float64) @ normal - base) * np.sign(side)
-            # (the plane's quad is drawn from float32 corners: a margin far above their rounding)
             if not heights.min() > PLANE_MARGIN * float(np.linalg.norm(normal)):
                 return False
         return bool(covers_once(buffers.vertices, sim.nw, sim.nh, view_projection, self.width, self.height))
