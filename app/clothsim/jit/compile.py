@@ -59,12 +59,13 @@ def side_kernels_beside() -> tuple[tuple[Any, tuple], ...]:
     return tuple(kernel for name in sorted(_BESIDE) for kernel in _BESIDE[name])
 
 
-def warm_side_kernels(but_beside: bool = False) -> None:
+def warm_side_kernels(beside: bool | None = None) -> None:
     """Compile (or load) the small kernels registered with :func:`on_warm`, in name order: the
-    blow-up guard, the rest detector and (once the renderer is imported) its kernels; with
-    ``but_beside``, not those the second process of a cold start is compiling."""
+    blow-up guard, the rest detector and (once the renderer is imported) its kernels. ``beside``
+    False: only those a cold start does not compile in its second process; True: only those it
+    does (:func:`side_kernels_beside`); None: all."""
     for name in sorted(_WARMERS):
-        if not (but_beside and name in _BESIDE):
+        if beside is None or beside == (name in _BESIDE):
             _WARMERS[name]()
 
 

@@ -490,9 +490,9 @@ class Renderer:
         scene = sim.scene
         if not self._in_order(scene, look):
             return False
+        now = float(getattr(sim, "time", 0.0))
         for plane in scene.planes:
             normal = np.asarray(plane.normal, dtype=np.float64)
-            now = float(getattr(sim, "time", 0.0))
             base = float(normal @ (np.asarray(plane.point, dtype=np.float64) + shift(plane, now)))
             side = float(normal @ cam.position) - base
             heights = (buffers.vertices[:, :3].astype(np.float64) @ normal - base) * np.sign(side)

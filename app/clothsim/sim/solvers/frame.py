@@ -355,11 +355,11 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
             repel_slots.compile(repel)
         _enter.compile(enter)
         _launch.compile(launch)
-        warm_side_kernels(but_beside=True)
+        warm_side_kernels(beside=False)
 
     with compiling_alone(_member, member):
         compile_elsewhere(_member, member, meanwhile, beside)
-        warm_side_kernels()  # those compiled beside, loaded from the cache
+        warm_side_kernels(beside=True)  # loaded from what the second process compiled (if any)
         # (compiled here, on one core or when the second process failed)
         calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0,) * 4))
         return Addresses(native_address(_member, member),
