@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -111,3 +112,6 @@ def test_bench_render_ends_with_a_clip_end_to_end(egl_available):
     assert set(rows) == {"overlapped", "serial", "render only", "driver limit"}
     assert all(float(v[0]) > 0 for v in rows.values())  # images per second
     assert rows["render only"][3] == "100%" and rows["driver limit"][4] == "100%"
+    # the process's CPU ms per image and the cores it kept busy (CPU time per wall time)
+    assert all(len(v) == 7 and float(v[5]) > 0 and 0 < float(v[6]) <= (os.cpu_count() or 1) + 0.5
+               for v in rows.values())

@@ -11,7 +11,10 @@ a slow period of a shared machine hits them all alike:
   fills at this size and sampling whatever the look computes.
 
 Frames per second are drawn frames (the clip's output) per second of wall time, from the first
-simulated frame to the last image read back; encoding the output is not included.
+simulated frame to the last image read back; encoding the output is not included. Beside them, the
+process's CPU time per image (every thread: the simulation's team, llvmpipe's rasterisers, Python)
+and the cores it kept busy on average: a clip can be no faster than its CPU time per image
+divided by the cores there are.
 """
 
 from __future__ import annotations
@@ -44,22 +47,22 @@ def run_end_to_end(scene_name: str, size: tuple[int, int], samples: int, look: s
         for r in (renderer, flat):
             r.render(states[0], look, settings)  # programs, buffers, textures
 
-        def clip(ahead: int) -> float:
+        def clip(ahead: int) -> tuple[float, float]:
             sim = Simulation(scene)
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.process_time()
             n = 0
             for state in clip_frames(sim, frames, every, False, None, ClipStats(), ahead=ahead):
                 renderer.render(state, look, settings)
                 n += 1
-            return n / (time.perf_counter() - t0)
+            return n / (time.perf_counter() - t0), (time.process_time() - c0) / n
 
-        def draw_only(r: Any) -> float:
-            t0 = time.perf_counter()
+        def draw_only(r: Any) -> tuple[float, float]:
+            t0, c0 = time.perf_counter(), time.process_time()
             for state in states:
                 r.render(state, look, settings)
-            return len(states) / (time.perf_counter() - t0)
+            return len(states) / (time.perf_counter() - t0), (time.process_time() - c0) / len(states)
 
-        variants: dict[str, Callable[[], float]] = {
+        variants: dict[str, Callable[[], tuple[float, float]]] = {
             "overlapped": lambda: clip(AHEAD),
             "serial": lambda: clip(0),
             "render only": lambda: draw_only(renderer),
@@ -67,21 +70,27 @@ def run_end_to_end(scene_name: str, size: tuple[int, int], samples: int, look: s
         }
         clip(AHEAD)  # the simulation's kernels, warm
         runs: dict[str, list[float]] = {k: [] for k in variants}
+        cpu: dict[str, list[float]] = {k: [] for k in variants}
         for _ in range(repeats):
             for name, fn in variants.items():
-                runs[name].append(fn())
+                fps, seconds = fn()
+                runs[name].append(fps)
+                cpu[name].append(seconds)
         info = renderer.info()
         aa = f"{renderer.samples}x MSAA" if renderer.samples else "no MSAA"
         print(f"end to end: {scene_name}, {look}, {size[0]}x{size[1]}, {aa}, "
               f"{info['renderer']} ({info['version']})")
         print(f"a clip of {frames} frames from the start, every {every} drawn ({len(states)} images); {repeats} "
-              "repeats round-robin; medians of images per second (simulate + draw + read back, no encoding)")
-        print(f"{'':<14}{'fps':>8}{'min':>8}{'max':>8}{'vs render only':>16}{'vs limit':>10}")
+              "repeats round-robin; medians of images per second (simulate + draw + read back, no encoding), "
+              "of the process's CPU ms per image (all threads) and of the cores it kept busy")
+        print(f"{'':<14}{'fps':>8}{'min':>8}{'max':>8}{'vs render only':>16}{'vs limit':>10}{'CPU ms':>8}{'cores':>7}")
         only = statistics.median(runs["render only"])
         limit = statistics.median(runs["driver limit"])
         for name, values in runs.items():
             m = statistics.median(values)
-            print(f"{name:<14}{m:>8.1f}{min(values):>8.1f}{max(values):>8.1f}{m / only:>16.0%}{m / limit:>10.0%}")
+            busy = statistics.median(c * f for c, f in zip(cpu[name], values))
+            print(f"{name:<14}{m:>8.1f}{min(values):>8.1f}{max(values):>8.1f}{m / only:>16.0%}{m / limit:>10.0%}"
+                  f"{1e3 * statistics.median(cpu[name]):>8.2f}{busy:>7.2f}")
     finally:
         flat.release()
         renderer.release()

@@ -90,7 +90,8 @@ def add_parsers(sub: argparse._SubParsersAction, bench_sub: argparse._SubParsers
                                          "spent in simulation, mesh update, upload, draw and read-back; then "
                                          "a clip end to end with the first look (phong if listed): "
                                          "--frames frames simulated and drawn, the simulation overlapped and "
-                                         "serial, against drawing alone and the driver's fill limit. "
+                                         "serial, against drawing alone and the driver's fill limit, each with "
+                                         "the process's CPU time per image and the cores it kept busy. "
                                          "Medians over repeats.")
     b.add_argument("scene", nargs="?", default="sphere", help="scene (default: sphere)")
     b.add_argument("--size", default="800x800", metavar="WxH", help="image size (default 800x800)")
