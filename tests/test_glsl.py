@@ -59,6 +59,14 @@ def test_program_is_valid_glsl(look):
     _check(validate(("vertex", vert), ("fragment", frag)), f"{look}: {vert_name} + {frag_name} linked")
 
 
+@pytest.mark.parametrize("vertex", sorted({vert for vert, _ in LOOKS.values()} - {"wireframe.vert", "channels.vert"}))
+def test_id_pass_fragment_stage_is_valid_glsl_with_each_surface_vertex_stage(vertex):
+    # render/seen.py draws a look's own vertex stage with ids.frag
+    frag = read_source("ids.frag")
+    _check(validate(("fragment", frag)), "ids.frag")
+    _check(validate(("vertex", read_source(vertex)), ("fragment", frag)), f"{vertex} + ids.frag linked")
+
+
 def test_validator_rejects_broken_sources():
     """The helper above reports failures: a syntax error, a type error, an unspliced include and a
     stage mismatch each make the validator fail."""

@@ -14,8 +14,9 @@ grown by every triangle that shares a corner with a kept one, and the CPU millis
 (every thread of the process) of Blinn-Phong, of the look drawn whole, of the look drawn from each
 kept set, and of the id pass at the image's size, alternated round by round.
 
-A measurement, not a feature: it writes the kept triangles into the renderer's own index buffers
-(padded with empty triangles) and puts the full ones back after each frame.
+A measurement: it writes the kept triangles into the renderer's own index buffers (padded with
+empty triangles) and puts the full ones back after each frame, with the renderer's own id pass
+(render/seen.py, which is the "seen at the image's size" row) turned off.
 """
 
 from __future__ import annotations
@@ -88,6 +89,7 @@ def main(argv: list[str] | None = None) -> int:
     id_pass = {side: Renderer(side, side, samples=0, sources={"displacement": id_source}) for side in (n, 4 * n)}
     settings = id_pass[n].settings_for(scene)
     renderer = Renderer(n, n, samples=4)
+    renderer._picks = False  # every triangle, or those this script chooses (not the renderer's own id pass)
     renderer.render(states[0], args.looks[0], settings)
     cloth = mesh.cloth_triangles(states[0].nw, states[0].nh).astype(np.uint32)
     has_sphere = bool(scene.spheres)

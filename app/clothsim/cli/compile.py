@@ -71,19 +71,20 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
               ("frame kernel: self-collision spec, moving pins", step(_tiny_scene("spec", False, pin_motion=True)))]
     items += [(f"integrator {name}", step(_tiny_scene("spec", True, name))) for name in ("implicit_euler", "xpbd")]
     items.append(("verlet, rate damping", step(_tiny_scene("spec", True, "verlet", "rate"))))
-    items.append(("guard, rest detector, render mesh and overlap", side_kernels))
+    items.append(("guard, rest detector, render mesh, overlap and id pass", side_kernels))
     return items
 
 
 def side_kernels() -> None:
     """Compile (or load) the small kernels every command meets after its first frame: the blow-up
-    guard, the rest detector and the renderer's mesh kernel and overlap test, with the argument
-    types they get."""
+    guard, the rest detector and the renderer's mesh kernel, overlap test and id pass, with the
+    argument types they get."""
     from ..jit.compile import warm_side_kernels
-    from ..render import mesh, overlap  # noqa: F401 - mesh, guard and rest register their warm-ups on import
+    from ..render import mesh, overlap, seen  # noqa: F401 - mesh, guard and rest register their warm-ups on import
     from ..sim import guard, rest  # noqa: F401
 
-    overlap.register_warm()  # the renderer registers it for the scenes that use it only
+    overlap.register_warm()  # the renderer registers these for the scenes and looks that use them only
+    seen.register_warm()
 
     warm_side_kernels()
 

@@ -25,6 +25,9 @@ LOOKS: dict[str, tuple[str, str]] = {
     "channels": ("channels.vert", "channels.frag"),
 }
 
+#: Suffix of a look's id-pass program in the cache (:meth:`Programs.ids`).
+IDS = "/ids"
+
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 
 
@@ -53,13 +56,25 @@ class Programs:
         prog = self._cache.get(look)
         if prog is None:
             vert, frag = self._sources.get(look) or tuple(read_source(n) for n in LOOKS[look])
-            try:
-                prog = self.ctx.program(vertex_shader=vert, fragment_shader=frag)
-            except Exception as exc:  # moderngl.Error carries the driver's compile log
-                first = " ".join(str(exc).split())[:300]
-                raise ClothsimError(f"shader '{look}' failed to compile: {first}") from None
-            self._cache[look] = prog
+            prog = self._cache[look] = self._compile(look, vert, frag)
         return prog
+
+    def ids(self, look: str) -> Any:
+        """``look``'s vertex stage with the id pass's fragment stage (``ids.frag``, see seen.py)."""
+        name = look + IDS
+        prog = self._cache.get(name)
+        if prog is None:
+            given = self._sources.get(look)
+            vert = given[0] if given else read_source(LOOKS[look][0])
+            prog = self._cache[name] = self._compile(name, vert, read_source("ids.frag"))
+        return prog
+
+    def _compile(self, name: str, vert: str, frag: str) -> Any:
+        try:
+            return self.ctx.program(vertex_shader=vert, fragment_shader=frag)
+        except Exception as exc:  # moderngl.Error carries the driver's compile log
+            first = " ".join(str(exc).split())[:300]
+            raise ClothsimError(f"shader '{name}' failed to compile: {first}") from None
 
     def places_as_given(self, look: str) -> bool:
         """True if ``look``'s vertex stage puts each vertex where the model and view-projection

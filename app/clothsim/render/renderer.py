@@ -24,7 +24,9 @@ from . import mesh, textures
 from .camera import FLIP_Y, Camera, default_position, default_target
 from .context import create_context
 from .overlap import covers_once, register_warm
-from .programs import Programs, set_matrix, set_uniform
+from .programs import IDS, Programs, set_matrix, set_uniform
+from .seen import Seen, worth_it
+from .seen import register_warm as register_seen_warm
 from .settings import (SHADERS, USES_COLOR_TEXTURE, USES_CUBEMAP, USES_HEIGHT_MAP, USES_TANGENTS,
                        RenderSettings, srgb_to_linear)
 from .waits import gl_calls
@@ -44,6 +46,9 @@ PLANE_MARGIN = 1e-5
 SPHERE_DRAW_SCALE = 0.92
 FAMILY_COLORS = ((0.95, 0.35, 0.30), (0.35, 0.85, 0.45), (0.40, 0.60, 1.00))  # sRGB
 STAGES = ("mesh", "upload", "draw", "readback")
+# A collider shape's vertex buffer: position, normal, tangent, uv (mesh.py, facets.py).
+SHAPE_LAYOUT = "3f 3f 3f 2f"
+SHAPE_ATTRIBUTES = ("in_position", "in_normal", "in_tangent", "in_uv")
 
 
 # Mesa's llvmpipe addresses a buffer with 32-bit signed offsets (lp_limits.h), whatever
@@ -97,6 +102,7 @@ class _ClothBuffers:
     uv_vbo: Any
     tri_ibo: Any
     tri_count: int
+    triangles: np.ndarray  # (3T,) uint32, what tri_ibo holds
     next_vbo: Any = None  # the data channels' next positions (made on first use)
 
 
@@ -136,14 +142,22 @@ class Renderer:
         self._springs: Springs | None = None
         self._spring_ibo: Any = None
         self._spring_ranges: list[tuple[int, int, int]] = []  # (family, first index, count)
-        self._spheres: dict[tuple[int, int], tuple[Any, Any, int]] = {}
-        self._planes: dict[tuple[Any, ...], tuple[Any, Any, int]] = {}
-        self._shapes: dict[tuple[Any, ...], tuple[Any, Any, int]] = {}
-        self._meshes: dict[int, tuple[Any, Any, Any]] = {}  # id(MeshSpec) -> (spec, vbo, ibo)
+        # (vertex buffer, index buffer, the indices (3T,) uint32) of each collider shape drawn
+        self._spheres: dict[tuple[int, int], tuple[Any, Any, np.ndarray]] = {}
+        self._planes: dict[tuple[Any, ...], tuple[Any, Any, np.ndarray]] = {}
+        self._shapes: dict[tuple[Any, ...], tuple[Any, Any, np.ndarray]] = {}
+        self._meshes: dict[int, tuple[Any, Any, Any, np.ndarray]] = {}  # id(MeshSpec) -> (spec, vbo, ibo, idx)
         self._vaos: dict[tuple[Any, ...], Any] = {}
         self._textures: dict[tuple[Any, ...], Any] = {}
         self._settings_for: tuple[Scene | None, RenderSettings | None] = (None, None)
         self._channels: Any = None  # the data pass's float targets (channels.py), made on first use
+        # The id pass of the looks that move their vertices, on a driver that shades hidden
+        # fragments under multisampling (seen.py); made on first use. ``_seen_phase`` is "ids"
+        # or "kept" while a frame's id pass or its drawing from the kept triangles runs.
+        self._picks = self.samples > 0 and _is_software(str(self.ctx.info.get("GL_RENDERER", "")))
+        self._seen: Seen | None = None
+        self._seen_phase: str | None = None
+        self._seen_whole: Any = None  # the scene whose last id pass found it had too many triangles
         # glFinish and glReadPixels without the GIL, so that a simulation thread runs while the
         # driver draws (see waits.py); None: moderngl's own calls.
         self._gl = gl_calls()
@@ -192,12 +206,15 @@ class Renderer:
 
     def prepare(self, scene: Scene, look: str) -> None:
         """Get ready to draw ``scene`` with ``look`` in a clip: a scene that draws the cloth alone
-        or over one plane has its frames tested for overlap (overlap.py), whose kernel is then
-        compiled (or loaded) with the other side kernels, before a clip's simulation thread
-        starts and, on a cold start, beside the simulation's first plan. (Without this, the
-        first frame compiles it.)"""
+        or over one plane has its frames tested for overlap (overlap.py), and a look that moves
+        its vertices is drawn from an id pass's triangles on llvmpipe (seen.py); the kernel each
+        needs is then compiled (or loaded) with the other side kernels, before a clip's
+        simulation thread starts and, on a cold start, beside the simulation's first plan.
+        (Without this, the first frame compiles it.)"""
         if self._in_order(scene, look):
             register_warm()
+        if self._picks and look != "wireframe" and not self.programs.places_as_given(look):
+            register_seen_warm()
 
     def settings_for(self, scene: Scene) -> RenderSettings:
         """The scene's render settings (validated once per scene object)."""
@@ -237,6 +254,9 @@ class Renderer:
         """Free every GL object and the context."""
         with self.ctx:
             self.programs.release()
+            if self._seen is not None:
+                self._seen.release()
+                self._seen = None
             if self._channels is not None:
                 self._channels.release()
                 self._channels = None
@@ -317,6 +337,7 @@ class Renderer:
             uv_vbo=self.ctx.buffer(mesh.cloth_uvs(nw, nh)),
             tri_ibo=self.ctx.buffer(tris),
             tri_count=int(tris.size),
+            triangles=tris,
         )
         return self._cloth
 
@@ -355,41 +376,63 @@ class Renderer:
     def _sphere(self, resolution: tuple[int, int]) -> tuple[Any, Any, int]:
         if resolution not in self._spheres:
             verts, idx = mesh.sphere_mesh(*resolution)
-            self._spheres[resolution] = (self.ctx.buffer(verts), self.ctx.buffer(idx), int(idx.size))
+            self._spheres[resolution] = (self.ctx.buffer(verts), self.ctx.buffer(idx), _indices(idx))
         return self._spheres[resolution]
 
     def _plane(self, point: tuple[float, ...], normal: tuple[float, ...]) -> tuple[Any, Any, int]:
         key = (tuple(point), tuple(normal))
         if key not in self._planes:
             verts, idx = mesh.plane_mesh(point, normal)  # type: ignore[arg-type]
-            self._planes[key] = (self.ctx.buffer(verts), self.ctx.buffer(idx), int(idx.size))
+            self._planes[key] = (self.ctx.buffer(verts), self.ctx.buffer(idx), _indices(idx))
         return self._planes[key]
 
     def _draw_shape(self, prog: Any, look: str, key: tuple[Any, ...], build: Any, offset: np.ndarray) -> None:
         """Draw a collider mesh made once by ``build()`` (world space at its scene pose), moved by ``offset``."""
-        import moderngl
-
         if key not in self._shapes:
             verts, idx = build()
-            self._shapes[key] = (self.ctx.buffer(verts), self.ctx.buffer(idx), int(idx.size))
-        vbo, ibo, _ = self._shapes[key]
-        vao = self._vao(look, "shape", key, lambda p: self.ctx.vertex_array(
-            p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
-            ibo, index_element_size=4, skip_errors=True))
+            self._shapes[key] = (self.ctx.buffer(verts), self.ctx.buffer(idx), _indices(idx))
+        vbo, ibo, idx = self._shapes[key]
         set_matrix(prog, "u_model", _translation(offset))
-        vao.render(moderngl.TRIANGLES)
+        self._draw_indexed(prog, look, "shape", key, [(vbo, SHAPE_LAYOUT, *SHAPE_ATTRIBUTES)], ibo, idx)
 
     def _drop_vaos(self, geometry: str) -> None:
         for key in [k for k in self._vaos if k[1] == geometry]:
             self._vaos.pop(key).release()
 
-    def _vao(self, look: str, geometry: str, key: Any, build: Any) -> Any:
+    def _vao(self, look: str, geometry: str, key: Any, build: Any, prog: Any = None) -> Any:
+        """The vertex array of ``geometry`` (``key``) for ``look``'s program, or for ``prog``
+        (cached under the name ``look``), made by ``build(program)`` once."""
         full = (look, geometry, key)
         vao = self._vaos.get(full)
         if vao is None:
-            vao = build(self.programs.get(look))
+            vao = build(prog if prog is not None else self.programs.get(look))
             self._vaos[full] = vao
         return vao
+
+    def _draw_indexed(self, prog: Any, look: str, geometry: str, key: Any, content: list[tuple[Any, ...]],
+                      ibo: Any, indices: np.ndarray) -> None:
+        """Draw the triangles ``indices`` (held by ``ibo``) of vertex buffers ``content`` with
+        ``prog``, ``look``'s program; in a frame's id pass numbered, with the id program, and in
+        its drawing from the kept triangles only those the pass found (seen.py)."""
+        import moderngl
+
+        def build(index_buffer: Any) -> Any:
+            return lambda p: self.ctx.vertex_array(p, content, index_buffer, index_element_size=4, skip_errors=True)
+
+        seen, phase = self._seen, self._seen_phase
+        if phase is None or seen is None:
+            self._vao(look, geometry, key, build(ibo)).render(moderngl.TRIANGLES)
+        elif phase == "ids":
+            seen.number(prog, indices.size // 3)
+            self._vao(look + IDS, geometry, key, build(ibo), prog).render(moderngl.TRIANGLES)
+        else:
+            kept, count, fresh = seen.kept((geometry, key), indices)
+            place = ("seen", key)
+            if fresh:  # a new buffer: the vertex arrays made on the old one go
+                for k in [k for k in self._vaos if k[1] == geometry and k[2] == place]:
+                    self._vaos.pop(k).release()
+            if count:
+                self._vao(look, geometry, place, build(kept)).render(moderngl.TRIANGLES, vertices=3 * count)
 
     # -- textures ----------------------------------------------------------------------------
     def _color_texture(self, path: str | None) -> Any:
@@ -434,6 +477,9 @@ class Renderer:
         # A frame whose image covers no sample twice, and whose cloth is in front of its plane if
         # it has one, draws the same bytes without the depth test and its buffer.
         once = self._without_depth(sim, look, buffers, cam, view_projection)
+        # a look that moves its vertices, on llvmpipe with multisampling: only the triangles an
+        # id pass finds are drawn (seen.py)
+        picked = not once and self._pick_seen(sim, look, settings, buffers, cam, view_projection)
         target = self._ms_color_fbo if once else self._ms_fbo
         target.use()
         ctx.viewport = (0, 0, self.width, self.height)
@@ -449,28 +495,66 @@ class Renderer:
 
         if once:  # a plane, if any, first: the cloth is in front of it (see _without_depth)
             self._draw_colliders(prog, look, sim, settings)
-        if look == "wireframe":
-            self._draw_wireframe(prog, sim, settings, buffers)
-        else:
-            vao = self._vao(look, "cloth", None, lambda p: ctx.vertex_array(
-                p, [(buffers.vbo, "3f 3f 3f", "in_position", "in_normal", "in_tangent"),
-                    (buffers.uv_vbo, "2f", "in_uv")],
-                buffers.tri_ibo, index_element_size=4, skip_errors=True))
-            set_matrix(prog, "u_model", ident)
-            vao.render(moderngl.TRIANGLES)
+        self._seen_phase = "kept" if picked else None
+        try:
+            if look == "wireframe":
+                self._draw_wireframe(prog, sim, settings, buffers)
+            else:
+                set_matrix(prog, "u_model", ident)
+                self._draw_cloth(prog, look, buffers)
 
-        if look == "wireframe":
-            # Colliders as line meshes, dimmer than the cloth.
-            ctx.wireframe = True
-            dim = tuple(0.45 * c for c in srgb_to_linear(settings.color))
-            set_uniform(prog, "u_color", (*dim, 1.0))
-        if not once:
-            self._draw_colliders(prog, look, sim, settings)
+            if look == "wireframe":
+                # Colliders as line meshes, dimmer than the cloth.
+                ctx.wireframe = True
+                dim = tuple(0.45 * c for c in srgb_to_linear(settings.color))
+                set_uniform(prog, "u_color", (*dim, 1.0))
+            if not once:
+                self._draw_colliders(prog, look, sim, settings)
+        finally:
+            self._seen_phase = None
         ctx.wireframe = False
         # The driver draws in the call that first needs the pixels; wait here, without the GIL,
         # rather than inside moderngl's resolve.
         self._finish()
         ctx.copy_framebuffer(self._fbo, target)  # resolves the multisampled image
+
+    def _draw_cloth(self, prog: Any, look: str, buffers: _ClothBuffers) -> None:
+        self._draw_indexed(prog, look, "cloth", None,
+                           [(buffers.vbo, "3f 3f 3f", "in_position", "in_normal", "in_tangent"),
+                            (buffers.uv_vbo, "2f", "in_uv")], buffers.tri_ibo, buffers.triangles)
+
+    def _pick_seen(self, sim: ClothState, look: str, settings: RenderSettings, buffers: _ClothBuffers,
+                   cam: Camera, view_projection: np.ndarray) -> bool:
+        """A frame's id pass (seen.py), for a look that moves its vertices on a driver that shades
+        hidden fragments under multisampling: the cloth and the colliders drawn as the look draws
+        them, numbered; True when the frame is then to be drawn from the triangles found."""
+        import moderngl
+
+        if (not self._picks or look == "wireframe" or self.programs.places_as_given(look)
+                or not worth_it(self.width * self.height, buffers.tri_count // 3) or sim.scene is self._seen_whole):
+            return False
+        if self._seen is None:
+            self._seen = Seen(self.ctx, self.width, self.height)
+        seen = self._seen
+        ctx = self.ctx
+        seen.begin()
+        ctx.viewport = (0, 0, self.width, self.height)
+        ctx.enable_only(moderngl.DEPTH_TEST)
+        ctx.front_face = "cw"
+        ctx.wireframe = False
+        prog = self.programs.ids(look)
+        self._set_common_uniforms(prog, look, cam, settings, view_projection)
+        self._seen_phase = "ids"
+        try:
+            set_matrix(prog, "u_model", np.eye(4))
+            self._draw_cloth(prog, look, buffers)
+            self._draw_colliders(prog, look, sim, settings)
+        finally:
+            self._seen_phase = None
+        if seen.read(self._gl):
+            return True
+        self._seen_whole = sim.scene  # its colliders' triangles too: drawn whole from now on
+        return False
 
     def _in_order(self, scene: Scene, look: str) -> bool:
         """Whether ``look`` may draw ``scene`` without the depth test, frame by frame
@@ -521,7 +605,7 @@ class Renderer:
         self.ctx.disable(moderngl.CULL_FACE)
         self.ctx.polygon_offset = (0.0, 0.0)
 
-    def _mesh_collider(self, spec: Any) -> tuple[Any, Any]:
+    def _mesh_collider(self, spec: Any) -> tuple[Any, Any, np.ndarray]:
         entry = self._meshes.get(id(spec))
         if entry is None or entry[0] is not spec:
             from .facets import mesh_collider_vertices
@@ -533,9 +617,9 @@ class Renderer:
                 entry[2].release()
 
             verts, idx = mesh_collider_vertices(spec)
-            entry = (spec, self.ctx.buffer(verts), self.ctx.buffer(idx))
+            entry = (spec, self.ctx.buffer(verts), self.ctx.buffer(idx), _indices(idx))
             self._meshes[id(spec)] = entry
-        return entry[1], entry[2]
+        return entry[1], entry[2], entry[3]
 
     # -- colliders, one method per kind (see clothsim.colliders.KINDS) --------------------------
     def _solid(self, look: str, culled: bool, offset: bool) -> None:
@@ -553,17 +637,13 @@ class Renderer:
         self.ctx.polygon_offset = (1.0, 4.0) if offset else (0.0, 0.0)
 
     def _draw_sphere(self, prog: Any, look: str, settings: RenderSettings, sphere: Any, now: float) -> None:
-        import moderngl
-
         self._solid(look, True, False)
-        vbo, ibo, _ = self._sphere(settings.sphere_resolution)
-        vao = self._vao(look, "sphere", settings.sphere_resolution, lambda p: self.ctx.vertex_array(
-            p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
-            ibo, index_element_size=4, skip_errors=True))
+        vbo, ibo, idx = self._sphere(settings.sphere_resolution)
         model = np.diag([*(3 * [sphere.radius * SPHERE_DRAW_SCALE]), 1.0])
         model[:3, 3] = posed(sphere, now).origin
         set_matrix(prog, "u_model", model)
-        vao.render(moderngl.TRIANGLES)
+        self._draw_indexed(prog, look, "sphere", settings.sphere_resolution,
+                           [(vbo, SHAPE_LAYOUT, *SHAPE_ATTRIBUTES)], ibo, idx)
 
     def _draw_capsule(self, prog: Any, look: str, settings: RenderSettings, capsule: Any, now: float) -> None:
         self._solid(look, True, False)
@@ -573,15 +653,11 @@ class Renderer:
             c.a, c.b, c.radius * SPHERE_DRAW_SCALE, *settings.sphere_resolution), shift(capsule, now))
 
     def _draw_plane(self, prog: Any, look: str, settings: RenderSettings, plane: Any, now: float) -> None:
-        import moderngl
-
         self._solid(look, False, True)
-        vbo, ibo, _ = self._plane(plane.point, plane.normal)
-        vao = self._vao(look, "plane", (plane.point, plane.normal), lambda p: self.ctx.vertex_array(
-            p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
-            ibo, index_element_size=4, skip_errors=True))
+        vbo, ibo, idx = self._plane(plane.point, plane.normal)
         set_matrix(prog, "u_model", _translation(shift(plane, now)))
-        vao.render(moderngl.TRIANGLES)
+        self._draw_indexed(prog, look, "plane", (plane.point, plane.normal),
+                           [(vbo, SHAPE_LAYOUT, *SHAPE_ATTRIBUTES)], ibo, idx)
 
     def _draw_box(self, prog: Any, look: str, settings: RenderSettings, box: Any, now: float) -> None:
         self._solid(look, True, True)
@@ -592,17 +668,12 @@ class Renderer:
     def _draw_mesh(self, prog: Any, look: str, settings: RenderSettings, spec: Any, now: float) -> None:
         """A triangle mesh at its place at the simulation's time (culled from behind when closed,
         both sides when open)."""
-        import moderngl
-
         self._solid(look, spec.closed, False)
-        vbo, ibo = self._mesh_collider(spec)
-        vao = self._vao(look, "mesh", id(spec), lambda p: self.ctx.vertex_array(
-            p, [(vbo, "3f 3f 3f 2f", "in_position", "in_normal", "in_tangent", "in_uv")],
-            ibo, index_element_size=4, skip_errors=True))
+        vbo, ibo, idx = self._mesh_collider(spec)
         model = np.eye(4)
         model[:3, 3] = spec.track().at(now)
         set_matrix(prog, "u_model", model)
-        vao.render(moderngl.TRIANGLES)
+        self._draw_indexed(prog, look, "mesh", id(spec), [(vbo, SHAPE_LAYOUT, *SHAPE_ATTRIBUTES)], ibo, idx)
 
     def _draw_wireframe(self, prog: Any, sim: ClothState, settings: RenderSettings,
                         buffers: _ClothBuffers) -> None:
@@ -668,6 +739,11 @@ class Renderer:
         else:
             self._fbo.read_into(image, components=3, alignment=1)
         return image
+
+
+def _indices(idx: Any) -> np.ndarray:
+    """A shape's triangle indices as the flat uint32 array its index buffer holds."""
+    return np.ascontiguousarray(np.asarray(idx, dtype=np.uint32).ravel())
 
 
 def _translation(offset: np.ndarray) -> np.ndarray:

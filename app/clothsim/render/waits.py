@@ -22,6 +22,7 @@ import numpy as np
 
 GL_PACK_ALIGNMENT = 0x0D05
 GL_RGB = 0x1907
+GL_RGBA = 0x1908
 GL_UNSIGNED_BYTE = 0x1401
 GL_PIXEL_PACK_BUFFER = 0x88EB
 
@@ -43,6 +44,15 @@ class GLCalls:
         self.bind_buffer(GL_PIXEL_PACK_BUFFER, 0)
         self.pixel_store(GL_PACK_ALIGNMENT, 1)
         self.read_pixels(0, 0, width, height, GL_RGB, GL_UNSIGNED_BYTE, image.ctypes.data)
+
+    def read_rgba(self, fbo: Any, image: np.ndarray) -> None:
+        """Read ``fbo``'s colour into ``image`` ((H, W) uint32, C-contiguous): each pixel's four
+        bytes, red first in memory."""
+        height, width = image.shape[:2]
+        fbo.use()
+        self.bind_buffer(GL_PIXEL_PACK_BUFFER, 0)
+        self.pixel_store(GL_PACK_ALIGNMENT, 4)
+        self.read_pixels(0, 0, width, height, GL_RGBA, GL_UNSIGNED_BYTE, image.ctypes.data)
 
 
 _CACHE: list[GLCalls | None] = []
