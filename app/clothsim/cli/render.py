@@ -299,23 +299,28 @@ def run_bench_render(args: argparse.Namespace) -> int:
     if args.frames < 1 or args.repeats < 1 or args.warmup < 0:
         raise ClothsimError("--frames and --repeats must be >= 1, --warmup >= 0")
     scene = load_scene(args.scene)
-    sim = Simulation(scene)
     renderer = _renderer((width, height), args.samples, size_label="--size", profile=True)
     try:
         info = renderer.info()
         aa = f"{renderer.samples}x MSAA" if renderer.samples else "no MSAA"
         print(f"bench render: {args.scene}, {width}x{height}, {aa}, "
               f"{info['renderer']} ({info['version']})")
-        print(f"{args.frames} frames x {args.repeats} repeats per shader after {args.warmup} warm-up frames; "
-              "medians; fps = render + read-back only; shares are of a whole frame incl. simulation")
+        print(f"{args.frames} frames x {args.repeats} repeats per shader, round-robin, after {args.warmup} warm-up "
+              "frames; medians; fps = render + read-back only; shares are of a whole frame incl. simulation")
         header = f"{'shader':<13}{'fps':>8}{'ms/frame':>10}{'sim':>7}" + "".join(f"{s:>9}" for s in STAGES)
         print(header)
+        # Each look draws its own simulation of the same frames; one repeat of each in turn, so
+        # that a slow spell of a shared machine hits every look alike (the ratios between looks
+        # hold even when the figures move).
+        sims = {}
         for look in shaders:
-            sim.reset()
-            sim.step(args.warmup)
-            renderer.render(sim, look)  # compiles the program, builds buffers and textures
-            fps_runs, ms_runs, shares = [], [], []
-            for _ in range(args.repeats):
+            sims[look] = Simulation(scene)
+            sims[look].step(args.warmup)
+            renderer.render(sims[look], look)  # compiles the program, builds buffers and textures
+        runs: dict[str, list[tuple[float, float, dict[str, float]]]] = {look: [] for look in shaders}
+        for _ in range(args.repeats):
+            for look in shaders:
+                sim = sims[look]
                 totals = dict.fromkeys(("sim", *STAGES), 0.0)
                 for _ in range(args.frames):
                     t = time.perf_counter()
@@ -326,11 +331,12 @@ def run_bench_render(args: argparse.Namespace) -> int:
                         totals[stage] += renderer.timings[stage]
                 render_s = sum(totals[s] for s in STAGES)
                 frame_s = render_s + totals["sim"]
-                fps_runs.append(args.frames / render_s)
-                ms_runs.append(1000.0 * frame_s / args.frames)
-                shares.append({k: v / frame_s for k, v in totals.items()})
-            share = {k: statistics.median(s[k] for s in shares) for k in shares[0]}
-            print(f"{look:<13}{statistics.median(fps_runs):>8.1f}{statistics.median(ms_runs):>10.2f}"
+                runs[look].append((args.frames / render_s, 1000.0 * frame_s / args.frames,
+                                   {k: v / frame_s for k, v in totals.items()}))
+        for look in shaders:
+            share = {k: statistics.median(r[2][k] for r in runs[look]) for k in runs[look][0][2]}
+            print(f"{look:<13}{statistics.median(r[0] for r in runs[look]):>8.1f}"
+                  f"{statistics.median(r[1] for r in runs[look]):>10.2f}"
                   f"{share['sim']:>7.0%}" + "".join(f"{share[s]:>9.0%}" for s in STAGES))
     finally:
         renderer.release()
