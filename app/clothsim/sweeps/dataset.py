@@ -67,10 +67,12 @@ class Dataset:
         Refuses an OUT that is not a folder, holds someone else's files or another sweep, or is
         being written by another process. Call :meth:`close` at the end, however the sweep ends.
         """
-        with os_errors(self.label, "cannot check"):
-            if self.out.is_dir():  # a sweep writing it now is named first, whatever else is wrong
-                locks.probe(self.out / locks.LOCK_NAME, self.label)
-        self.check()  # before locking: nothing is created in a folder that is refused anyway
+        self._name_a_writer()  # a sweep writing it now is named first, whatever else is wrong
+        try:
+            self.check()  # before locking: nothing is created in a folder that is refused anyway
+        except ClothsimError:
+            self._name_a_writer()  # one that took the lock since, and wrote what the check refused
+            raise
         try:
             self._take_lock()
             self.check()  # again, now that no other sweep can change it
@@ -79,6 +81,11 @@ class Dataset:
         except BaseException:
             self.close()
             raise
+
+    def _name_a_writer(self) -> None:
+        with os_errors(self.label, "cannot check"):
+            if self.out.is_dir():
+                locks.probe(self.out / locks.LOCK_NAME, self.label)
 
     def close(self) -> None:
         """Unlock OUT; if this sweep created it and wrote nothing, remove it again."""
@@ -139,8 +146,8 @@ class Dataset:
             if names:
                 if DEFINITION not in names:
                     raise ClothsimError(f"{label}: folder is not empty ({len(names)} "
-                                        f"{'file' if len(names) == 1 else 'files'} not written by clothsim sweep); "
-                                        "choose another or empty it")
+                                        f"{'file' if len(names) == 1 else 'files'} not written by clothsim sweep, "
+                                        f"such as {sorted(names)[0]!r}); choose another or empty it")
                 theirs = self._read_definition()
                 if theirs != self.definition:
                     raise ClothsimError(f"{label}: holds a different sweep ({_difference(theirs, self.definition)}); "
