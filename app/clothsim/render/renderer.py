@@ -373,13 +373,13 @@ class Renderer:
             first += n
         self._springs = springs
 
-    def _sphere(self, resolution: tuple[int, int]) -> tuple[Any, Any, int]:
+    def _sphere(self, resolution: tuple[int, int]) -> tuple[Any, Any, np.ndarray]:
         if resolution not in self._spheres:
             verts, idx = mesh.sphere_mesh(*resolution)
             self._spheres[resolution] = (self.ctx.buffer(verts), self.ctx.buffer(idx), _indices(idx))
         return self._spheres[resolution]
 
-    def _plane(self, point: tuple[float, ...], normal: tuple[float, ...]) -> tuple[Any, Any, int]:
+    def _plane(self, point: tuple[float, ...], normal: tuple[float, ...]) -> tuple[Any, Any, np.ndarray]:
         key = (tuple(point), tuple(normal))
         if key not in self._planes:
             verts, idx = mesh.plane_mesh(point, normal)  # type: ignore[arg-type]
@@ -611,7 +611,7 @@ class Renderer:
             from .facets import mesh_collider_vertices
 
             if entry is not None:  # another scene's mesh had this id: drop what was built for it
-                for key in [k for k in self._vaos if k[1] == "mesh" and k[2] == id(spec)]:
+                for key in [k for k in self._vaos if k[1] == "mesh" and k[2] in (id(spec), ("seen", id(spec)))]:
                     self._vaos.pop(key).release()
                 entry[1].release()
                 entry[2].release()
