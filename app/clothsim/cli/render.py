@@ -317,7 +317,9 @@ def run_bench_render(args: argparse.Namespace) -> int:
             sims[look] = Simulation(scene)
             sims[look].step(args.warmup)
             renderer.render(sims[look], look)  # compiles the program, builds buffers and textures
-        runs: dict[str, list[tuple[float, float, dict[str, float]]]] = {look: [] for look in shaders}
+        fps_runs: dict[str, list[float]] = {look: [] for look in shaders}
+        ms_runs: dict[str, list[float]] = {look: [] for look in shaders}
+        shares: dict[str, list[dict[str, float]]] = {look: [] for look in shaders}
         for _ in range(args.repeats):
             for look in shaders:
                 sim = sims[look]
@@ -331,12 +333,12 @@ def run_bench_render(args: argparse.Namespace) -> int:
                         totals[stage] += renderer.timings[stage]
                 render_s = sum(totals[s] for s in STAGES)
                 frame_s = render_s + totals["sim"]
-                runs[look].append((args.frames / render_s, 1000.0 * frame_s / args.frames,
-                                   {k: v / frame_s for k, v in totals.items()}))
+                fps_runs[look].append(args.frames / render_s)
+                ms_runs[look].append(1000.0 * frame_s / args.frames)
+                shares[look].append({k: v / frame_s for k, v in totals.items()})
         for look in shaders:
-            share = {k: statistics.median(r[2][k] for r in runs[look]) for k in runs[look][0][2]}
-            print(f"{look:<13}{statistics.median(r[0] for r in runs[look]):>8.1f}"
-                  f"{statistics.median(r[1] for r in runs[look]):>10.2f}"
+            share = {k: statistics.median(s[k] for s in shares[look]) for k in ("sim", *STAGES)}
+            print(f"{look:<13}{statistics.median(fps_runs[look]):>8.1f}{statistics.median(ms_runs[look]):>10.2f}"
                   f"{share['sim']:>7.0%}" + "".join(f"{share[s]:>9.0%}" for s in STAGES))
     finally:
         renderer.release()

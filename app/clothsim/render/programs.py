@@ -55,8 +55,7 @@ class Programs:
         """The compiled program of ``look``."""
         prog = self._cache.get(look)
         if prog is None:
-            vert, frag = self._sources.get(look) or tuple(read_source(n) for n in LOOKS[look])
-            prog = self._cache[look] = self._compile(look, vert, frag)
+            prog = self._cache[look] = self._compile(look, *self._texts(look))
         return prog
 
     def ids(self, look: str) -> Any:
@@ -64,10 +63,13 @@ class Programs:
         name = look + IDS
         prog = self._cache.get(name)
         if prog is None:
-            given = self._sources.get(look)
-            vert = given[0] if given else read_source(LOOKS[look][0])
-            prog = self._cache[name] = self._compile(name, vert, read_source("ids.frag"))
+            prog = self._cache[name] = self._compile(name, self._texts(look)[0], read_source("ids.frag"))
         return prog
+
+    def _texts(self, look: str) -> tuple[str, str]:
+        """``look``'s (vertex, fragment) texts: the replaced ones if given, else the files'."""
+        given = self._sources.get(look)
+        return given if given else (read_source(LOOKS[look][0]), read_source(LOOKS[look][1]))
 
     def _compile(self, name: str, vert: str, frag: str) -> Any:
         try:

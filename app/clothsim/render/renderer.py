@@ -101,7 +101,6 @@ class _ClothBuffers:
     vbo: Any
     uv_vbo: Any
     tri_ibo: Any
-    tri_count: int
     triangles: np.ndarray  # (3T,) uint32, what tri_ibo holds
     next_vbo: Any = None  # the data channels' next positions (made on first use)
 
@@ -336,7 +335,6 @@ class Renderer:
             vbo=self.ctx.buffer(reserve=vertices.nbytes, dynamic=True),
             uv_vbo=self.ctx.buffer(mesh.cloth_uvs(nw, nh)),
             tri_ibo=self.ctx.buffer(tris),
-            tri_count=int(tris.size),
             triangles=tris,
         )
         return self._cloth
@@ -531,7 +529,7 @@ class Renderer:
         import moderngl
 
         if (not self._picks or look == "wireframe" or self.programs.places_as_given(look)
-                or not worth_it(self.width * self.height, buffers.tri_count // 3) or sim.scene is self._seen_whole):
+                or not worth_it(self.width * self.height, buffers.triangles.size // 3) or sim.scene is self._seen_whole):
             return False
         if self._seen is None:
             self._seen = Seen(self.ctx, self.width, self.height)

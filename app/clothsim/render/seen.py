@@ -77,6 +77,7 @@ class Seen:
         self.fbo = ctx.framebuffer(self._color, self._depth)
         self._ids = np.empty((height, width), dtype=np.uint32)
         self._calls: list[tuple[int, int]] = []  # (first number, triangles) per draw call
+        self._numbered = 0  # triangles numbered so far this frame
         self._next = 0  # the next draw call of the kept pass
         self._found = np.zeros(1, dtype=bool)
         self._kept: dict[Any, tuple[Any, int]] = {}  # (geometry, key) -> (index buffer, its triangles)
@@ -89,19 +90,21 @@ class Seen:
         self.fbo.use()
         self.ctx.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
         self._calls.clear()
+        self._numbered = 0
         self.triangles = self.drawn = 0
 
     def number(self, prog: Any, triangles: int) -> None:
         """Number the next draw call's ``triangles`` (set ``u_first`` of the id program ``prog``)."""
-        first = 1 + sum(n for _, n in self._calls)
+        first = 1 + self._numbered
         self._calls.append((first, triangles))
+        self._numbered += triangles
         if "u_first" in prog:
             prog["u_first"].value = first
 
     def read(self, gl: Any) -> bool:
         """Read the pass back and note which triangles it found; False when the frame is to be
         drawn whole after all (too many triangles for its size: :func:`worth_it`)."""
-        total = sum(n for _, n in self._calls)
+        total = self._numbered
         self.triangles = self.drawn = total
         if not worth_it(self.pixels, total):
             return False
