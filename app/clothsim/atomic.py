@@ -444,11 +444,12 @@ def _fsync_folder(folder: Path) -> None:
 
 @contextlib.contextmanager
 def _no_interrupts() -> Iterator[None]:
-    """Hold off Ctrl-C while moving outputs into place or cleaning up.
+    """Hold off Ctrl-C while moving outputs into place or cleaning up, then deliver it.
 
-    A second Ctrl-C during cleanup would otherwise leave the temporary output behind, and one
-    during the final renames would leave a frames folder half old, half new. The signal is
-    ignored for these few file operations; the run is already ending either way.
+    A Ctrl-C during cleanup would otherwise leave the temporary output behind, and one during
+    the final renames would leave a frames folder half old, half new. A Ctrl-C that arrives
+    meanwhile is held and raised once these few file operations are done: it used to be
+    ignored, and a sweep interrupted while it moved a file into its dataset then ran on.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -457,8 +458,13 @@ def _no_interrupts() -> Iterator[None]:
     if previous is None:  # installed outside Python: it could not be put back
         yield
         return
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    held: list[int] = []
+    signal.signal(signal.SIGINT, lambda signum, frame: held.append(signum))
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+        if held:
+            # Delivered as if it arrived now, to whatever handled Ctrl-C before (ignored if
+            # that ignored it, as in a sweep's workers).
+            signal.raise_signal(signal.SIGINT)
