@@ -40,6 +40,7 @@ def command() -> list[str]:
 def environment() -> dict[str, str]:
     env = dict(os.environ)
     env.pop("DISPLAY", None)
+    env["PYTHONFAULTHANDLER"] = "1"  # a command that hangs shows where, on SIGABRT
     return env
 
 

@@ -114,7 +114,12 @@ def test_ctrl_c_ends_a_local_sweep_within_seconds(tmp_path):
         time.sleep(0.5)
         os.killpg(proc.pid, signal.SIGINT)
         sent = time.monotonic()
-        _, err = proc.communicate(timeout=30)
+        try:
+            _, err = proc.communicate(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.send_signal(signal.SIGABRT)  # faulthandler prints every thread's stack
+            _, err = proc.communicate(timeout=15)
+            raise AssertionError(f"the sweep did not stop within 15 s of Ctrl-C; its threads:\n{err}") from None
         took = time.monotonic() - sent
     finally:
         kill9(proc)
