@@ -294,39 +294,47 @@ def test_enospc_in_process_for_every_writer(tmp_path, monkeypatch):
 
 
 @pytest.mark.parametrize("ctrl_c", ["raises", "ignored"])
-def test_ctrl_c_while_an_output_is_moved_into_place_is_held_not_lost(tmp_path, monkeypatch, ctrl_c):
-    """A Ctrl-C that arrives while a finished output is renamed into place lets the rename end,
-    then interrupts: it used to be dropped, and a sweep interrupted while it moved a file into
-    its dataset ran on. Where Ctrl-C is ignored (a sweep's workers), it stays ignored."""
+@pytest.mark.parametrize("out", ["a.json", "frames/"])
+def test_ctrl_c_while_an_output_is_moved_into_place_is_held_not_lost(tmp_path, monkeypatch, ctrl_c, out):
+    """A Ctrl-C that arrives while a finished output is renamed into place lets the rename end
+    and the output's lock go, then interrupts: it used to be dropped, and a sweep interrupted
+    while it moved a file into its dataset ran on. Where Ctrl-C is ignored (a sweep's workers),
+    it stays ignored."""
     import threading
 
     from clothsim import atomic
 
     if threading.current_thread() is not threading.main_thread():
         pytest.skip("signal handlers are set from the main thread only")
-    commit = atomic._commit_file
+    folder = out.endswith("/")
+    name = "_commit_folder" if folder else "_commit_file"
+    commit = getattr(atomic, name)
 
-    def pressed_meanwhile(tmp, dest):
+    def pressed_meanwhile(*args):
         os.kill(os.getpid(), signal.SIGINT)
-        commit(tmp, dest)
+        commit(*args)
 
-    monkeypatch.setattr(atomic, "_commit_file", pressed_meanwhile)
-    dest = tmp_path / "a.json"
-    previous = signal.signal(signal.SIGINT, signal.default_int_handler if ctrl_c == "raises" else signal.SIG_IGN)
+    monkeypatch.setattr(atomic, name, pressed_meanwhile)
+    dest = tmp_path / out.rstrip("/")
+    handler = signal.default_int_handler if ctrl_c == "raises" else signal.SIG_IGN
+    previous = signal.signal(signal.SIGINT, handler)
+
+    def write() -> None:
+        with atomic.atomic_output(dest, directory=folder) as tmp:
+            (tmp / "frame_00000.png" if folder else tmp).write_text("new")
+
     try:
         if ctrl_c == "raises":
             with pytest.raises(KeyboardInterrupt):
-                with atomic.atomic_output(dest) as tmp:
-                    tmp.write_text("new")
+                write()
         else:
-            with atomic.atomic_output(dest) as tmp:
-                tmp.write_text("new")
-        assert signal.getsignal(signal.SIGINT) is (signal.default_int_handler if ctrl_c == "raises"
-                                                    else signal.SIG_IGN)
+            write()
+        assert signal.getsignal(signal.SIGINT) is handler
     finally:
         signal.signal(signal.SIGINT, previous)
-    assert dest.read_text() == "new"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json"]
+    assert (dest / "frame_00000.png" if folder else dest).read_text() == "new"
+    assert sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*")) == (
+        ["frames", "frames/frame_00000.png"] if folder else ["a.json"])  # no temporary, no lock
 
 
 def test_failing_ffmpeg_is_one_line(tmp_path, monkeypatch):

@@ -175,20 +175,31 @@ def atomic_output(dest: str | os.PathLike[str], *, directory: bool = False, labe
                 yield tmp
         else:
             yield tmp
-        with _no_interrupts(), os_errors(label):
-            if directory:
-                _commit_folder(tmp, dest, home, owned)
-            else:
-                _commit_file(tmp, dest)
     except BaseException:
         with _no_interrupts():
-            _remove(tmp)
-            if held is not None:
-                held.release()
-            _remove_folders(created)
+            _discard(tmp, held, created)
         raise
+    # A Ctrl-C while the output moves into place takes effect once it is there and unlocked.
+    with _no_interrupts():
+        try:
+            with os_errors(label):
+                if directory:
+                    _commit_folder(tmp, dest, home, owned)
+                else:
+                    _commit_file(tmp, dest)
+        except BaseException:
+            _discard(tmp, held, created)
+            raise
+        if held is not None:
+            held.release()
+
+
+def _discard(tmp: Path, held: locks.OutputLock | None, created: list[Path]) -> None:
+    """Remove an unfinished output's temporary, release its lock and the folders made for it."""
+    _remove(tmp)
     if held is not None:
         held.release()
+    _remove_folders(created)
 
 
 # -- locking -------------------------------------------------------------------------------------
