@@ -96,6 +96,20 @@ def ctrl_c_as_on_a_terminal() -> None:
     signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
+def after_ctrl_c(proc: subprocess.Popen, what: str, seconds: float) -> tuple[str, str]:
+    """``proc``'s output once it ends, after a Ctrl-C; one still running after ``seconds`` is
+    made to print every thread's stack (its ``PYTHONFAULTHANDLER=1`` turns SIGABRT into that),
+    and the test fails with it."""
+    import signal
+
+    try:
+        return proc.communicate(timeout=seconds)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGABRT)
+        _, stderr = proc.communicate(timeout=30)
+        raise AssertionError(f"the {what} did not stop within {seconds:g} s of Ctrl-C; its threads:\n{stderr}") from None
+
+
 def child_pids(pid: int) -> list[int]:
     """The process ids of ``pid``'s children (Linux's /proc)."""
     kids: list[int] = []

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import REPO, SCENES, ctrl_c_as_on_a_terminal, error_line, run_cli
+from conftest import REPO, SCENES, after_ctrl_c, ctrl_c_as_on_a_terminal, error_line, run_cli
 
 FAST = ("--frames", "2", "--every", "1", "--size", "64x64")
 
@@ -376,12 +376,7 @@ def _interrupt_when(cwd: Path, out: str, started) -> subprocess.CompletedProcess
             time.sleep(0.05)
         time.sleep(0.3)
         os.killpg(p.pid, signal.SIGINT)
-        try:
-            stdout, stderr = p.communicate(timeout=60)
-        except subprocess.TimeoutExpired:
-            p.send_signal(signal.SIGABRT)  # faulthandler prints every thread's stack
-            _, stderr = p.communicate(timeout=30)
-            raise AssertionError(f"the render did not stop within 60 s of Ctrl-C; its threads:\n{stderr}") from None
+        stdout, stderr = after_ctrl_c(p, "render", 60)
     finally:
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)

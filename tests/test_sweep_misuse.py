@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from conftest import child_pids, ctrl_c_as_on_a_terminal, error_line
+from conftest import after_ctrl_c, child_pids, ctrl_c_as_on_a_terminal, error_line
 from test_locks import clothsim, kill9, manifest_ids, start, wait_for_holder
 
 LONG = ("--set", "cloth.ks=3000,4000,5000,6000", "--frames", "100000")
@@ -114,12 +114,7 @@ def test_ctrl_c_ends_a_local_sweep_within_seconds(tmp_path):
         time.sleep(0.5)
         os.killpg(proc.pid, signal.SIGINT)
         sent = time.monotonic()
-        try:
-            _, err = proc.communicate(timeout=15)
-        except subprocess.TimeoutExpired:
-            proc.send_signal(signal.SIGABRT)  # faulthandler prints every thread's stack
-            _, err = proc.communicate(timeout=15)
-            raise AssertionError(f"the sweep did not stop within 15 s of Ctrl-C; its threads:\n{err}") from None
+        _, err = after_ctrl_c(proc, "sweep", 15)
         took = time.monotonic() - sent
     finally:
         kill9(proc)
