@@ -104,9 +104,9 @@ class Seen:
     def read(self, gl: Any) -> bool:
         """Read the pass back and note which triangles it found; False when the frame is to be
         drawn whole after all (too many triangles for its size: :func:`worth_it`)."""
-        total = self._numbered
-        self.triangles = self.drawn = total
+        total = self.triangles = self._numbered
         if not worth_it(self.pixels, total):
+            self.drawn = total  # every one, drawn whole
             return False
         if gl is not None:
             gl.read_rgba(self.fbo, self._ids)
@@ -116,7 +116,7 @@ class Seen:
         self._found = np.zeros(total + 1, dtype=np.bool_)
         mark_found(self._ids.reshape(-1), self._found)
         self._next = 0
-        self.drawn = 0
+        self.drawn = 0  # counted by kept()
         return True
 
     def kept(self, place: Any, indices: np.ndarray) -> tuple[Any, int, bool]:

@@ -39,20 +39,19 @@ class GLCalls:
     def read_rgb(self, fbo: Any, image: np.ndarray) -> None:
         """Read ``fbo``'s colour into ``image`` ((H, W, 3) uint8, C-contiguous), as moderngl's
         ``read_into(image, components=3, alignment=1)`` does."""
-        height, width = image.shape[:2]
-        fbo.use()  # binds it for reading (and drawing) through moderngl, which tracks the binding
-        self.bind_buffer(GL_PIXEL_PACK_BUFFER, 0)
-        self.pixel_store(GL_PACK_ALIGNMENT, 1)
-        self.read_pixels(0, 0, width, height, GL_RGB, GL_UNSIGNED_BYTE, image.ctypes.data)
+        self._read(fbo, image, GL_RGB, 1)
 
     def read_rgba(self, fbo: Any, image: np.ndarray) -> None:
         """Read ``fbo``'s colour into ``image`` ((H, W) uint32, C-contiguous): each pixel's four
         bytes, red first in memory."""
+        self._read(fbo, image, GL_RGBA, 4)
+
+    def _read(self, fbo: Any, image: np.ndarray, layout: int, alignment: int) -> None:
         height, width = image.shape[:2]
-        fbo.use()
+        fbo.use()  # binds it for reading (and drawing) through moderngl, which tracks the binding
         self.bind_buffer(GL_PIXEL_PACK_BUFFER, 0)
-        self.pixel_store(GL_PACK_ALIGNMENT, 4)
-        self.read_pixels(0, 0, width, height, GL_RGBA, GL_UNSIGNED_BYTE, image.ctypes.data)
+        self.pixel_store(GL_PACK_ALIGNMENT, alignment)
+        self.read_pixels(0, 0, width, height, layout, GL_UNSIGNED_BYTE, image.ctypes.data)
 
 
 _CACHE: list[GLCalls | None] = []
