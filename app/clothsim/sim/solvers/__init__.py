@@ -30,7 +30,7 @@ from ..passes.springs import accumulate_forces
 from ..passes.corrections import corrections_into, has_corrections
 from ..state import Corrections
 from .implicit import CG_MAX_ITERATIONS, CG_TOLERANCE, Implicit
-from .substep import Step, integrate_substeps
+from .substep import Step, implicit_address, integrate_substeps
 from .symplectic import Symplectic
 from .verlet import VerletRate, verlet_start
 from .xpbd import XPBD_ITERATIONS, Xpbd
@@ -81,6 +81,9 @@ class IntegratorState:
         self.inv_mass = self.mask / sim.mass
         self.scratch = np.zeros((7, 3, n))
         self.cg_iterations = 0
+        #: implicit Euler: its last substep's CG iterations, and ``Implicit.at`` (see _advance)
+        self.cg_last = np.zeros(1, np.int64)
+        self.implicit_at = 0
         #: the plan whose first call took the compile lock (see _advance)
         self.compiled_for: Any = None
         #: ``Corrections.at`` for the plan it was compiled for
@@ -184,7 +187,7 @@ def _advance(sim: Any, steps: int) -> None:
         # Rate damping goes into the implicit system; spec damping scales the solved velocity.
         keep_after = 1.0 if c > 0.0 else f
         implicit = Implicit(st.mask, st.si, st.sj, st.kspr, st.jac, st.scratch, c, keep_after, CG_TOLERANCE,
-                            CG_MAX_ITERATIONS)
+                            CG_MAX_ITERATIONS, st.cg_last)
     elif name == "xpbd":
         xpbd = Xpbd(st.inv_mass, st.si, st.sj, st.kspr, st.lam, st.iterations)
     else:  # the scene validator only admits the four names above
@@ -193,6 +196,10 @@ def _advance(sim: Any, steps: int) -> None:
                 cloth.gravity, dt, f, phi, fix)
     if st.compiled_for is not plan:
         st.post_at = corrections_address(step, post)
+        if implicit is not None:
+            st.implicit_at = implicit_address(step, implicit)
+    if implicit is not None:
+        implicit = implicit._replace(at=st.implicit_at)
     args = (steps, step, stream, post._replace(at=st.post_at), plan.forces, plan.pins, verlet, symplectic, implicit,
             xpbd)
     if st.compiled_for is not plan:

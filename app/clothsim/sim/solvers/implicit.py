@@ -5,6 +5,14 @@ x1 = x0 + dt v1, with K = -dF/dx assembled per spring as 3x3 blocks
 Ks = k (d d^T + max(0, 1 - L/l) (I - d d^T)). The compressive part of the transverse term is
 dropped (clamped at 0) so the matrix stays symmetric positive definite and conjugate gradient
 applies. Pinned points are removed by masking (their dv is 0). Jacobi preconditioner.
+
+The rule is one compiled function, :func:`implicit_update` (its helpers inlined into it), that the
+substep calls by address (``Implicit.at``): its fast-math code then exists once, as compiled, and a
+run gives the same bits whether that code was just compiled or loaded from the cache. Linked into
+the substep as a plain call, it existed twice (its own compile, and a copy re-optimised inside the
+substep's module), and which copy ran depended on which had been loaded first: a cold start ran
+the one, a warm start the other, and their sums, reassociated differently, differed in the last
+bits (docs/history/determinism.md, 2026-12-07).
 """
 
 from __future__ import annotations
@@ -15,12 +23,14 @@ import numpy as np
 from numba import njit
 
 from ...jit import KERNEL
+from ...jit.internals import native_address
 
 
 class Implicit(NamedTuple):
     """The implicit Euler rule's arrays: the free-point mask, the springs (ends, stiffness), the
     Jacobian blocks (6, S) and the CG work space (7, 3, N), the damping rate ``c``, the factor on
-    the solved velocity (spec damping) and the CG stopping rule."""
+    the solved velocity (spec damping), the CG stopping rule, the CG iterations of the last
+    substep (``its``, one int64) and the address of :func:`implicit_update` (:func:`update_address`)."""
 
     mask: np.ndarray
     si: np.ndarray
@@ -32,6 +42,8 @@ class Implicit(NamedTuple):
     keep_after: float
     tol: float
     max_iter: int
+    its: np.ndarray
+    at: int = 0
 
 
 # Relative residual at which CG stops, and its iteration cap (a stiff run hitting the cap is
@@ -40,16 +52,18 @@ CG_TOLERANCE = 1e-9
 CG_MAX_ITERATIONS = 400
 
 
-@njit(**KERNEL)
+@njit(inline="always", **KERNEL)
+def _across(x: np.ndarray, a: int, b: int) -> tuple[float, float, float]:
+    """x[:, b] - x[:, a]: from point ``a`` to point ``b``."""
+    return x[0, b] - x[0, a], x[1, b] - x[1, a], x[2, b] - x[2, a]
+
+
+@njit(inline="always", **KERNEL)
 def spring_jacobians(pos: np.ndarray, si: np.ndarray, sj: np.ndarray, rest: np.ndarray, kspr: np.ndarray,
                      jac: np.ndarray) -> None:
     """jac (6, S) = the symmetric blocks Ks as (xx, yy, zz, xy, xz, yz)."""
     for s in range(si.shape[0]):
-        a = si[s]
-        b = sj[s]
-        ex = pos[0, b] - pos[0, a]
-        ey = pos[1, b] - pos[1, a]
-        ez = pos[2, b] - pos[2, a]
+        ex, ey, ez = _across(pos, si[s], sj[s])
         ln = np.sqrt(ex * ex + ey * ey + ez * ez)
         if not ln > 0.0:
             for q in range(6):
@@ -72,16 +86,14 @@ def spring_jacobians(pos: np.ndarray, si: np.ndarray, sj: np.ndarray, rest: np.n
         jac[5, s] = u * dy * dz
 
 
-@njit(**KERNEL)
+@njit(inline="always", **KERNEL)
 def apply_stiffness(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, y: np.ndarray, out: np.ndarray) -> None:
     """out = K y for the assembled spring blocks (K positive semidefinite)."""
     out[:, :] = 0.0
     for s in range(si.shape[0]):
         a = si[s]
         b = sj[s]
-        rx = y[0, a] - y[0, b]
-        ry = y[1, a] - y[1, b]
-        rz = y[2, a] - y[2, b]
+        rx, ry, rz = _across(y, b, a)
         gx = jac[0, s] * rx + jac[3, s] * ry + jac[4, s] * rz
         gy = jac[3, s] * rx + jac[1, s] * ry + jac[5, s] * rz
         gz = jac[4, s] * rx + jac[5, s] * ry + jac[2, s] * rz
@@ -93,7 +105,7 @@ def apply_stiffness(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, y: np.ndarr
         out[2, b] -= gz
 
 
-@njit(**KERNEL)
+@njit(inline="always", **KERNEL)
 def _dot(x: np.ndarray, y: np.ndarray) -> float:
     acc = 0.0
     for ax in range(3):
@@ -102,7 +114,7 @@ def _dot(x: np.ndarray, y: np.ndarray) -> float:
     return acc
 
 
-@njit(**KERNEL)
+@njit(inline="always", **KERNEL)
 def solve_velocity_change(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, mask: np.ndarray, b: np.ndarray,
                           diag: np.ndarray, m_eff: float, h2: float, dv: np.ndarray, r: np.ndarray,
                           z: np.ndarray, p: np.ndarray, ap: np.ndarray, tol: float, max_iter: int) -> int:
@@ -152,10 +164,11 @@ def solve_velocity_change(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, mask:
 def implicit_update(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray, free: np.ndarray,
                     mask: np.ndarray, si: np.ndarray, sj: np.ndarray, rest: np.ndarray, kspr: np.ndarray,
                     jac: np.ndarray, scratch: np.ndarray, mass: float, dt: float, c: float, keep_after: float,
-                    tol: float, max_iter: int) -> int:
+                    tol: float, max_iter: int, its: np.ndarray) -> None:
     """One linearised backward-Euler update of velocities and positions (free points only).
 
-    ``scratch`` is (7, 3, N): b, diag, dv, r, z, p, Ap. Returns the CG iterations used.
+    ``scratch`` is (7, 3, N): b, diag, dv, r, z, p, Ap. The CG iterations used go to ``its[0]``.
+    Called by address only (see the module's notes).
     """
     b = scratch[0]
     diag = scratch[1]
@@ -173,8 +186,8 @@ def implicit_update(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: 
         for ax in range(3):
             diag[ax, si[s]] += h2 * jac[ax, s]
             diag[ax, sj[s]] += h2 * jac[ax, s]
-    its = solve_velocity_change(jac, si, sj, mask, b, diag, m_eff, h2, dv, scratch[3], scratch[4], scratch[5],
-                                scratch[6], tol, max_iter)
+    its[0] = solve_velocity_change(jac, si, sj, mask, b, diag, m_eff, h2, dv, scratch[3], scratch[4], scratch[5],
+                                   scratch[6], tol, max_iter)
     for ax in range(3):
         for k in range(free.shape[0]):
             q = free[k]
@@ -182,4 +195,16 @@ def implicit_update(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: 
             vel[ax, q] = v
             last[ax, q] = pos[ax, q]
             pos[ax, q] += dt * v
-    return its
+
+
+def update_address(args: tuple) -> int:
+    """``Implicit.at``: the address of :func:`implicit_update` compiled (or loaded) for the types
+    of ``args``, its arguments as the substep passes them, by one process at a time (see
+    :func:`clothsim.jit.compile.compiling_alone`)."""
+    from numba import typeof
+
+    from ...jit.compile import compiling_alone
+
+    argtypes = tuple(typeof(a) for a in args)
+    with compiling_alone(implicit_update, argtypes):
+        return native_address(implicit_update, argtypes)

@@ -26,12 +26,12 @@ from ...jit.internals import call_native, stack_address
 from ..clock import substep_time
 from ..passes.pins import move_pins, pin_velocities
 from ..state import Corrections
-from .implicit import Implicit, implicit_update
+from .implicit import Implicit, update_address
 from .symplectic import Symplectic, symplectic_step
 from .verlet import VerletRate, verlet_rate_step
 from .xpbd import Xpbd, kick, predict, solve_constraints
 
-__all__ = ["Step", "integrate_substeps", "velocities_from_positions"]
+__all__ = ["Step", "implicit_address", "integrate_substeps", "velocities_from_positions"]
 
 
 class Step(NamedTuple):
@@ -66,6 +66,19 @@ def velocities_from_positions(pos: np.ndarray, last: np.ndarray, vel: np.ndarray
         for k in range(free.shape[0]):
             p = free[k]
             vel[ax, p] = (pos[ax, p] - last[ax, p]) * inv
+
+
+@njit(inline="always", **KERNEL)
+def implicit_arguments(s: Step, g: Implicit) -> tuple:
+    """The arguments of :func:`~.implicit.implicit_update` for a substep, in its order (also called
+    from Python, for the types its address is compiled for: :func:`implicit_address`)."""
+    return (s.pos, s.last, s.vel, s.forces, s.free, g.mask, g.si, g.sj, s.rest, g.kspr, g.jac, g.scratch, s.mass,
+            s.dt, g.c, g.keep_after, g.tol, g.max_iter, g.its)
+
+
+def implicit_address(s: Step, g: Implicit) -> int:
+    """``Implicit.at`` for the substep's state ``s`` and the rule's group ``g``."""
+    return update_address(implicit_arguments.py_func(s, g))
 
 
 @njit(**EXACT)
@@ -107,9 +120,10 @@ def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, forces: 
         if symplectic is not None:
             symplectic_step(pos, last, s.vel, s.forces, s.free, 1.0 / s.mass, s.dt, s.f, s.phi)
         if implicit is not None:
-            iterations += implicit_update(pos, last, s.vel, s.forces, s.free, implicit.mask, implicit.si,
-                                          implicit.sj, s.rest, implicit.kspr, implicit.jac, implicit.scratch, s.mass,
-                                          s.dt, implicit.c, implicit.keep_after, implicit.tol, implicit.max_iter)
+            # by address: the rule's code is the one compiled for it, not a copy linked in here
+            # (see .implicit), so a cold and a warm start run the same instructions
+            call_native(implicit.at, implicit_arguments(s, implicit))
+            iterations += implicit.its[0]
         if xpbd is not None:
             if len(forces) > 0:
                 kick(s.vel, s.forces, s.free, xpbd.w, s.dt * s.phi)
