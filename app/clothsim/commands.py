@@ -15,6 +15,24 @@ from .scene import SIMULATION, Scene, check_memory, load_scene
 from .validate import At, check, integer
 
 
+def add_command(sub: argparse._SubParsersAction, name: str, summary: str, description: str,
+                scene: str | None = "pinned2") -> argparse.ArgumentParser:
+    """Register command ``name`` on ``sub``, with its one-line ``summary`` (the command list's),
+    its ``description`` (its own ``--help``'s) and its SCENE argument: optional with ``scene`` as
+    the default, or required when ``scene`` is None. Every command that runs a scene starts so."""
+    p = sub.add_parser(name, help=summary, description=description)
+    if scene is None:
+        p.add_argument("scene", help="scene file or bundled scene name")
+    else:
+        p.add_argument("scene", nargs="?", default=scene, help=f"scene file or bundled scene name (default: {scene})")
+    return p
+
+
+def add_output(p: argparse.ArgumentParser, what: str) -> None:
+    """The required ``-o/--output OUT`` of a command that writes ``what``."""
+    p.add_argument("-o", "--output", required=True, metavar="OUT", help=f"output: {what}")
+
+
 def add_scene_overrides(p: argparse.ArgumentParser) -> None:
     """Options shared by simulate and render that override the scene's ``simulation`` object."""
     p.add_argument("--steps", type=int, metavar="S", help="simulation_steps: substeps per frame (default: scene, else 30)")
@@ -76,16 +94,10 @@ def progress(total: int, desc: str, show: bool = True):  # noqa: ANN201
 
 def add_simulate_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``clothsim simulate``."""
-    p = sub.add_parser(
-        "simulate",
-        help="simulate a scene and save the final state (.npz)",
-        description=(
-            "Simulate a scene for a number of frames (each frame is simulation_steps substeps of "
-            "1/(frames_per_sec*simulation_steps) seconds, as in the course's clothsim) and save "
-            "positions, last_positions and pinned points to a NumPy .npz file."
-        ),
-    )
-    p.add_argument("scene", nargs="?", default="pinned2", help="scene file or bundled scene name (default: pinned2)")
+    p = add_command(sub, "simulate", "simulate a scene and save the final state (.npz)",
+                    "Simulate a scene for a number of frames (each frame is simulation_steps substeps of "
+                    "1/(frames_per_sec*simulation_steps) seconds, as in the course's clothsim) and save "
+                    "positions, last_positions and pinned points to a NumPy .npz file.")
     p.add_argument("--frames", type=int, default=90, metavar="N", help="frames to simulate (default: 90 = 1 s)")
     p.add_argument("--out", "-o", default="state.npz", metavar="FILE", help="output .npz file (default: state.npz)")
     p.add_argument("--until-rest", action="store_true",

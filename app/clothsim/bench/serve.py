@@ -14,17 +14,17 @@ import asyncio
 import statistics
 import time
 
+from ..commands import add_command
 from ..errors import ClothsimError
 from ..render.settings import SHADERS, parse_size
 
 
 def add_parser(bench_sub: argparse._SubParsersAction) -> None:
     """Register ``clothsim bench serve``."""
-    p = bench_sub.add_parser("serve", help="frames/s streamed by clothsim serve vs the renderer alone",
-                             description="Frames per second of the renderer alone (simulate + render), with the "
-                                         "JPEG encode, and streamed by clothsim serve to a WebSocket client on "
-                                         "this machine; medians of repeats, per image size.")
-    p.add_argument("scene", nargs="?", default="pinned2", help="scene (default: pinned2, what clothsim serve opens)")
+    p = add_command(bench_sub, "serve", "frames/s streamed by clothsim serve vs the renderer alone",
+                    "Frames per second of the renderer alone (simulate + render), with the JPEG encode, and "
+                    "streamed by clothsim serve to a WebSocket client on this machine; medians of repeats, per "
+                    "image size. The default scene is the one clothsim serve opens.")
     p.add_argument("--sizes", default="512x512,800x800", metavar="LIST", help="image sizes (default 512x512,800x800)")
     p.add_argument("--shader", default="phong", choices=SHADERS, help="look (default phong)")
     p.add_argument("--seconds", type=float, default=5.0, metavar="S", help="timed seconds per repeat (default 5)")

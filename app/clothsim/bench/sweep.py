@@ -24,17 +24,17 @@ from pathlib import Path
 
 import numpy as np
 
+from ..commands import add_command
 from ..errors import ClothsimError
 from ..validate import check, integer
 
 
 def add_parser(bench_sub: argparse._SubParsersAction) -> None:
     """Register ``clothsim bench sweep``."""
-    p = bench_sub.add_parser("sweep", help="runs per minute: a plain API loop vs clothsim sweep with 1 and 2 workers",
-                             description="Runs per minute of the same runs (--runs values of cloth.ks) as a plain "
-                                         "loop over the API and as a sweep dataset with 1 and with 2 local worker "
-                                         "processes, each timed from a fresh process to its exit.")
-    p.add_argument("scene", nargs="?", default="selfCollision", help="scene (default: selfCollision, 50x50)")
+    p = add_command(bench_sub, "sweep", "runs per minute: a plain API loop vs clothsim sweep with 1 and 2 workers",
+                    "Runs per minute of the same runs (--runs values of cloth.ks) as a plain loop over the API "
+                    "and as a sweep dataset with 1 and with 2 local worker processes, each timed from a fresh "
+                    "process to its exit. The default scene is the 50 x 50 selfCollision.", scene="selfCollision")
     p.add_argument("--runs", type=int, default=16, metavar="N",
                    help="runs per variant (default 16, a 4 x 4 grid; each variant pays its start-up, "
                         "about 1-1.5 s, once, so fewer runs weigh it more)")

@@ -14,6 +14,7 @@ import time
 from typing import Any
 
 from .. import validate as V
+from ..commands import add_command, add_output
 from ..errors import ClothsimError
 from ..render.settings import SHADERS, TERMS, RenderSettings, parse_size
 from ..scene import MAX_FPS, MIN_FPS
@@ -24,14 +25,11 @@ DEFAULT_FRAMES = 90
 
 def add_parsers(sub: argparse._SubParsersAction, bench_sub: argparse._SubParsersAction) -> None:
     """Register ``render`` and ``info`` on ``sub`` and ``render`` on the ``bench`` subparsers."""
-    p = sub.add_parser("render", help="simulate a scene and render it to .png/.gif/.mp4 or a folder of PNGs",
-                       description="Simulate SCENE and render it headless (EGL). A .png gets the state after "
-                                   "--frames frames; .gif, .mp4 and folders get every --every-th frame from the "
-                                   "start. Flags override the scene's optional \"render\" object.")
-    p.add_argument("scene", nargs="?", default=DEFAULT_SCENE,
-                   help=f"scene file or bundled scene name (default: {DEFAULT_SCENE})")
-    p.add_argument("-o", "--output", required=True, metavar="OUT",
-                   help="output: .png, .gif, .mp4, or a directory (no suffix or trailing /) for numbered PNGs")
+    p = add_command(sub, "render", "simulate a scene and render it to .png/.gif/.mp4 or a folder of PNGs",
+                    "Simulate SCENE and render it headless (EGL). A .png gets the state after --frames frames; "
+                    ".gif, .mp4 and folders get every --every-th frame from the start. Flags override the "
+                    "scene's optional \"render\" object.", scene=DEFAULT_SCENE)
+    add_output(p, ".png, .gif, .mp4, or a directory (no suffix or trailing /) for numbered PNGs")
     p.add_argument("--shader", choices=SHADERS, help="look (default: scene, else phong)")
     p.add_argument("--frames", type=int, default=DEFAULT_FRAMES, metavar="N",
                    help=f"frames to simulate (default {DEFAULT_FRAMES}: one second at 90 frames/s)")

@@ -6,25 +6,19 @@ import argparse
 import sys
 import time
 
-from ..commands import add_scene_overrides, apply_overrides
+from ..commands import add_command, add_output, add_scene_overrides, apply_overrides
 from ..validate import check, integer
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``clothsim export``."""
-    p = sub.add_parser(
-        "export",
-        help="simulate a scene and export the animated cloth (.usd/.usda/.usdc, or a folder of OBJs)",
-        description=(
-            "Simulate SCENE for --frames frames and export frame 0, every --every-th frame and the "
-            "last one, for Blender, Houdini and other tools: OUT ending in .usd, .usda or .usdc is "
-            "one USD stage (needs the 'usd' extra: pip install 'clothsim[usd]'); OUT with no suffix "
-            "or a trailing / is a folder of cloth_NNNNN.obj files plus colliders.obj."
-        ),
-    )
-    p.add_argument("scene", nargs="?", default="pinned2", help="scene file or bundled scene name (default: pinned2)")
-    p.add_argument("-o", "--output", required=True, metavar="OUT",
-                   help="output: .usd, .usda, .usdc, or a folder (no suffix or trailing /) for an OBJ sequence")
+    p = add_command(sub, "export",
+                    "simulate a scene and export the animated cloth (.usd/.usda/.usdc, or a folder of OBJs)",
+                    "Simulate SCENE for --frames frames and export frame 0, every --every-th frame and the "
+                    "last one, for Blender, Houdini and other tools: OUT ending in .usd, .usda or .usdc is "
+                    "one USD stage (needs the 'usd' extra: pip install 'clothsim[usd]'); OUT with no suffix "
+                    "or a trailing / is a folder of cloth_NNNNN.obj files plus colliders.obj.")
+    add_output(p, ".usd, .usda, .usdc, or a folder (no suffix or trailing /) for an OBJ sequence")
     p.add_argument("--frames", type=int, default=90, metavar="N", help="frames to simulate (default: 90 = 1 s)")
     p.add_argument("--every", type=int, default=1, metavar="K", help="export every K-th frame (default: 1)")
     add_scene_overrides(p)

@@ -4,30 +4,27 @@ from __future__ import annotations
 
 import argparse
 
+from ..commands import add_command, add_output
 from ..errors import ClothsimError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     """Register ``clothsim sweep``."""
-    p = sub.add_parser(
-        "sweep",
-        help="run a scene over a grid or a sample of parameters: a labelled contact sheet (.png) or a dataset folder",
-        description=(
-            "Run SCENE once per parameter set. Several --set make the full grid (run_00000, run_00001, ... in "
-            "grid order, last --set fastest); --samples N --seed S draws N runs instead. OUT ending in .png is a "
-            "contact sheet of each run's last frame (or of each frame listed in --frames) as 'clothsim render' "
-            "draws it; any other OUT is a dataset folder: manifest.jsonl and runs/<id>.npz (positions every "
-            "--every frames; with --views, images, depth, normals, masks, flow and cameras per run; meta.json describes "
-            "every field and the train/valid/test split), resumed by re-running the same command. Every run's scene "
-            "is validated first."
-        ),
-    )
-    p.add_argument("scene", help="scene file or bundled scene name")
+    p = add_command(
+        sub, "sweep",
+        "run a scene over a grid or a sample of parameters: a labelled contact sheet (.png) or a dataset folder",
+        "Run SCENE once per parameter set. Several --set make the full grid (run_00000, run_00001, ... in "
+        "grid order, last --set fastest); --samples N --seed S draws N runs instead. OUT ending in .png is a "
+        "contact sheet of each run's last frame (or of each frame listed in --frames) as 'clothsim render' "
+        "draws it; any other OUT is a dataset folder: manifest.jsonl and runs/<id>.npz (positions every "
+        "--every frames; with --views, images, depth, normals, masks, flow and cameras per run; meta.json describes "
+        "every field and the train/valid/test split), resumed by re-running the same command. Every run's scene "
+        "is validated first.", scene=None)
     p.add_argument("--set", dest="sets", action="append", required=True, metavar="FIELD=VALUES",
                    help="a dotted field (cloth.ks, simulation.simulation_steps, sphere.1.radius, "
                         "render.light.intensity) and comma-separated JSON values; with --samples also "
                         "uniform:A:B or loguniform:A:B")
-    p.add_argument("-o", "--output", required=True, metavar="OUT", help="a .png contact sheet, or a dataset folder")
+    add_output(p, "a .png contact sheet, or a dataset folder")
     p.add_argument("--frames", default="90", metavar="N",
                    help="frames to simulate (default 90); for a .png a comma-separated list draws one cell per frame")
     p.add_argument("--every", type=int, default=1, metavar="K", help="dataset: keep positions every K frames (default 1)")
