@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..atomic import atomic_output
-from .plotting import save_grid_figure
+from .plotting import add_study_options, save_grid_figure, study_sizes
 from ..errors import ClothsimError, SimulationBlowUp
 from ..scene import INTEGRATORS, Scene, SphereSpec, load_scene
 
@@ -292,19 +292,15 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--reference-substeps", type=int, default=None, help="substeps per frame of the reference (default 1024)")
     p.add_argument("--grid", type=int, default=None, help="points per side of the pinned cloths (default 50, the spec's)")
     p.add_argument("--end-time", type=float, default=None, help="simulated seconds (default 1)")
-    p.add_argument("--integrators", nargs="*", choices=INTEGRATORS, default=None, help="default: all four")
     p.add_argument("--no-spec-model", action="store_true", help="skip the Provot + contact run")
-    p.add_argument("--png", default="work_precision.png", help="work-precision plot (default work_precision.png)")
-    p.add_argument("--json", default=None, help="write the runs and orders as JSON")
+    add_study_options(p, "work-precision plot", "work_precision.png", "the runs and orders")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the study, print the table and the orders, write the plot (and JSON)."""
-    max_sub = args.max_substeps or (32 if args.quick else 128)
-    ref_sub = args.reference_substeps or (256 if args.quick else 1024)
-    grid = args.grid or (20 if args.quick else 50)
-    end_time = args.end_time or (0.5 if args.quick else 1.0)
+    max_sub, ref_sub, grid, end_time = study_sizes(args, max_substeps=(32, 128), reference_substeps=(256, 1024),
+                                                   grid=(20, 50), end_time=(0.5, 1.0))
     if max_sub < 1 or ref_sub < 2 * max_sub or grid < 3 or not end_time > 0:
         raise ClothsimError("bench accuracy: need max-substeps >= 1, reference-substeps >= 2 x max-substeps, "
                             "grid >= 3 and end-time > 0")

@@ -19,7 +19,7 @@ import time
 import numpy as np
 
 from ..atomic import atomic_output
-from .plotting import save_grid_figure
+from .plotting import add_study_options, save_grid_figure, study_sizes
 from ..errors import ClothsimError, SimulationBlowUp
 from ..scene import INTEGRATORS, Scene, load_scene
 
@@ -154,9 +154,7 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--max-substeps", type=int, default=None, help="largest substeps per frame (default 64)")
     p.add_argument("--grid", type=int, default=10, help="points per side (default 10)")
     p.add_argument("--end-time", type=float, default=None, help="simulated seconds per run (default 0.5)")
-    p.add_argument("--integrators", nargs="*", choices=INTEGRATORS, default=None, help="default: all four")
-    p.add_argument("--png", default="stability_map.png", help="map (default stability_map.png)")
-    p.add_argument("--json", default=None, help="write runs and summary as JSON")
+    add_study_options(p, "map", "stability_map.png", "runs and summary")
     p.set_defaults(func=run)
 
 
@@ -164,10 +162,8 @@ def run(args: argparse.Namespace) -> int:
     """Sweep, print the summary, write the map (and JSON)."""
     from ..sim.guard import ENERGY_FACTOR, ENERGY_SLACK, EXPLICIT_INTEGRATORS
 
-    n_ks = args.ks_count or (4 if args.quick else 7)
-    n_rho = args.density_count or (2 if args.quick else 4)
-    max_sub = args.max_substeps or (16 if args.quick else 64)
-    end_time = args.end_time or (0.2 if args.quick else 0.5)
+    n_ks, n_rho, max_sub, end_time = study_sizes(args, ks_count=(4, 7), density_count=(2, 4), max_substeps=(16, 64),
+                                                 end_time=(0.2, 0.5))
     if n_ks < 1 or n_rho < 1 or max_sub < 1 or args.grid < 3 or not end_time > 0:
         raise ClothsimError("bench stability: counts and max-substeps must be >= 1, grid >= 3, end-time > 0")
     ks_values = list(np.logspace(1, 7, n_ks)) if n_ks > 1 else [5000.0]
