@@ -9,38 +9,28 @@ not turn.
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
 
 import numpy as np
 from numba import njit
 
 from ....jit import KERNEL
-from ...team import chunk_of
-from .moving import Tracks, pack_tracks, pose_rows
+from .rows import collide, packer, pose, reach, row_group
 from .shapes import overlaps, push_out
+
+__all__ = ["Boxes", "CARRY_AT", "CUBOID_CARRY", "CUBOID_COLUMNS", "Group", "POINTS", "collide", "collide_rows",
+           "cuboid_surface", "pack", "pose", "reach", "reach_rows"]
 
 #: Columns of a row, and where its carry starts.
 CUBOID_COLUMNS = 19
 CUBOID_CARRY = 16
 
 
-class Boxes(NamedTuple):
-    """The scene's boxes: their rows, reach flags and the tracks of the moving ones (None when
-    none moves)."""
-
-    rows: np.ndarray
-    on: np.ndarray
-    tracks: Tracks | None
-
-
-Group = Boxes
-
-
-def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> Boxes:
-    """The group of ``scene``'s boxes."""
-    rows = np.array([[*b.center, *b.half_extents, *(x for r in b.matrix() for x in r), b.friction, 0.0, 0.0, 0.0]
-                     for b in scene.boxes], dtype=np.float64)
-    return Boxes(rows, np.zeros(len(rows), dtype=np.bool_), pack_tracks(scene.boxes, clock, dt, lambda b: b.center))
+#: The scene's boxes: their rows, reach flags and tracks.
+Group = Boxes = row_group("Boxes", __name__, "The scene's boxes (see clothsim.sim.passes.colliders.rows).")
+#: A pose moves a box's center; its carry is the last three columns of its row (see :mod:`.rows`).
+POINTS, CARRY_AT = 1, CUBOID_CARRY
+pack = packer(Boxes, "boxes", lambda b: (*b.center, *b.half_extents, *(x for r in b.matrix() for x in r), b.friction,
+                                         0.0, 0.0, 0.0), CUBOID_COLUMNS, lambda b: b.center)
 
 
 @njit(**KERNEL)
@@ -73,18 +63,18 @@ def cuboid_surface(x: float, y: float, z: float, row: np.ndarray, offset: float)
 
 
 @njit(**KERNEL)
-def collide_cuboids(pos: np.ndarray, last: np.ndarray, free: np.ndarray, cuboids: np.ndarray, on: np.ndarray,
-                    offset: float) -> None:
+def collide_rows(pos: np.ndarray, last: np.ndarray, free: np.ndarray, cuboids: np.ndarray, on: np.ndarray,
+                 offset: float) -> None:
     """Push the points inside each reachable box out of its nearest face, with friction (see module)."""
     for o in range(cuboids.shape[0]):
         if on[o]:
             row = cuboids[o]
-            push_out(pos, last, free, row, 1.0 - row[15], 0.5 * min(row[3], min(row[4], row[5])), CUBOID_CARRY,
-                      cuboid_surface, offset)
+            push_out(pos, last, free, row, 1.0 - row[15], 0.5 * min(row[3], min(row[4], row[5])), row[CUBOID_CARRY],
+                     row[CUBOID_CARRY + 1], row[CUBOID_CARRY + 2], cuboid_surface, offset)
 
 
 @njit(**KERNEL)
-def reach_cuboids(box: np.ndarray, cuboids: np.ndarray, on: np.ndarray, offset: float) -> int:
+def reach_rows(box: np.ndarray, cuboids: np.ndarray, on: np.ndarray, offset: float) -> int:
     """Mark the boxes whose bounds (world-axis box around the oriented one) meet the cloth's box;
     returns how many were ruled out."""
     skipped = 0
@@ -99,24 +89,3 @@ def reach_cuboids(box: np.ndarray, cuboids: np.ndarray, on: np.ndarray, offset: 
                          row[0] - ex, row[1] - ey, row[2] - ez, row[0] + ex, row[1] + ey, row[2] + ez)
         skipped += 0 if on[o] else 1
     return skipped
-
-
-# -- the kind's passes (see clothsim.sim.passes.colliders) -----------------------------------------
-
-@njit(**KERNEL)
-def pose(g: Boxes, substep: int) -> None:
-    """Put the moving boxes at their pose at the end of substep ``substep``."""
-    pose_rows(g.tracks, g.rows, 1, g.rows, CUBOID_CARRY, substep)
-
-
-@njit(**KERNEL)
-def reach(g: Boxes, box: np.ndarray, on: np.ndarray, offset: float) -> int:
-    """Mark the boxes the cloth's box reaches in ``on``; returns how many were ruled out."""
-    return reach_cuboids(box, g.rows, on, offset)
-
-
-@njit(**KERNEL)
-def collide(g: Boxes, pos: np.ndarray, last: np.ndarray, free: np.ndarray, c: int, on: np.ndarray,
-            offset: float) -> None:
-    """Work item ``c`` (of CHUNKS) of the free points against the reachable boxes."""
-    collide_cuboids(pos, last, chunk_of(free, c), g.rows, on, offset)

@@ -1,5 +1,5 @@
-"""What the closed shapes (capsules, oriented boxes) share: the swept test along each point's
-relative path, and the reach test of their bounds.
+"""What the closed shapes (spheres, capsules, oriented boxes) share: the push onto a ball's surface,
+the swept test along each point's relative path, and the reach test of their bounds.
 
 Rows (float64), one per collider, each ending with ``carry``: how far the collider moved during
 the current substep (zero for a static one; written by its kind's ``pose``): see :mod:`.capsule`
@@ -45,21 +45,35 @@ def samples(dx: float, dy: float, dz: float, step: float) -> int:
 
 
 @njit(inline="always", **KERNEL)
+def ball_surface(x: float, y: float, z: float, cx: float, cy: float, cz: float,
+                 r: float) -> tuple[bool, float, float, float]:
+    """(inside, surface point) of the ball of radius ``r`` about c: a point inside goes to the
+    surface point in its direction from c (c itself has no direction and is left alone). A
+    sphere is one; a capsule is the one about the axis point nearest the point."""
+    dx = x - cx
+    dy = y - cy
+    dz = z - cz
+    d2 = dx * dx + dy * dy + dz * dz
+    if d2 <= r * r and d2 > 0.0:
+        s = r / np.sqrt(d2)
+        return True, cx + dx * s, cy + dy * s, cz + dz * s
+    return False, x, y, z
+
+
+@njit(inline="always", **KERNEL)
 def push_out(pos: np.ndarray, last: np.ndarray, free: np.ndarray, row: np.ndarray, keep: float, step: float,
-              carry_at: int, surface: Any, offset: float) -> None:
-    """One closed shape's pass: each free point's relative path from its carried last position,
-    sampled ``step`` apart; the first sample ``surface`` finds inside is pushed out, keeping
-    ``keep`` of the relative motion (friction).
+             cx: float, cy: float, cz: float, surface: Any, offset: float) -> None:
+    """One shape's swept pass: each free point's relative path from its last position carried by
+    (cx, cy, cz), sampled ``step`` apart; the first sample ``surface`` (given the shape's ``row``)
+    finds inside is pushed out, keeping ``keep`` of the relative motion (friction). The moving
+    sphere's test is this pass too.
 
     The capsule's ``surface`` is declared ``inline="always"``, so it is always part of this loop's
     own code: compiled as a callee of its own, it left the loop's machine code (fast-math)
     different in the last bits depending on whether it had been compiled in the same process or
     loaded from the cache, so the capsule scene gave other numbers after a cold start than after
-    a warm one (docs/performance.md, Determinism). The box's does not (checked the same way), and
+    a warm one (docs/history/determinism.md). The box's does not (checked the same way), and
     inlining it would change the box's numbers, so it is left a callee."""
-    cx = row[carry_at]
-    cy = row[carry_at + 1]
-    cz = row[carry_at + 2]
     for k in range(free.shape[0]):
         p = free[k]
         lx = last[0, p] + cx
