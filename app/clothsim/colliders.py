@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Any, Callable
+from typing import Any, Callable, ClassVar
 
 from . import validate as V
 from .meshcollider import MESH, MESH_BYTES_PER_POINT
@@ -28,34 +28,38 @@ MIN_LENGTH, MAX_LENGTH = 1e-6, 1e6
 _FRICTION = V.number(ge=0.0, le=1.0)
 
 
+class Anchored:
+    """A collider spec whose ``motion`` keyframes give the position of one of its fields (named by
+    ``ANCHOR``): its ``anchor``."""
+
+    ANCHOR: ClassVar[str]
+
+    @property
+    def anchor(self) -> tuple[float, float, float]:
+        """The position a ``motion`` keyframe gives (the field ``ANCHOR`` names)."""
+        return getattr(self, self.ANCHOR)
+
+
 @dataclass(frozen=True)
-class SphereSpec:
+class SphereSpec(Anchored):
     """A sphere collider; ``motion`` (optional) moves its origin."""
 
+    ANCHOR: ClassVar[str] = "origin"
     origin: tuple[float, float, float]
     radius: float
     friction: float
     motion: MotionSpec | None = None
 
-    @property
-    def anchor(self) -> tuple[float, float, float]:
-        """The position a ``motion`` keyframe gives: the origin."""
-        return self.origin
-
 
 @dataclass(frozen=True)
-class PlaneSpec:
+class PlaneSpec(Anchored):
     """A plane collider; ``normal`` is stored normalised; ``motion`` (optional) moves its point."""
 
+    ANCHOR: ClassVar[str] = "point"
     point: tuple[float, float, float]
     normal: tuple[float, float, float]
     friction: float
     motion: MotionSpec | None = None
-
-    @property
-    def anchor(self) -> tuple[float, float, float]:
-        """The position a ``motion`` keyframe gives: the plane's point."""
-        return self.point
 
 
 @dataclass(frozen=True)
@@ -76,21 +80,17 @@ class CapsuleSpec:
 
 
 @dataclass(frozen=True)
-class BoxSpec:
+class BoxSpec(Anchored):
     """An oriented box collider: ``center``, ``half_extents`` along its own axes and ``rotation``
     in degrees about x, y, z, applied as R = Rz . Ry . Rx (x first, right-handed). ``motion``
     (optional) moves its center; the box does not turn."""
 
+    ANCHOR: ClassVar[str] = "center"
     center: tuple[float, float, float]
     half_extents: tuple[float, float, float]
     rotation: tuple[float, float, float]
     friction: float
     motion: MotionSpec | None = None
-
-    @property
-    def anchor(self) -> tuple[float, float, float]:
-        """The position a ``motion`` keyframe gives: the center."""
-        return self.center
 
     def matrix(self) -> tuple[tuple[float, float, float], ...]:
         """R = Rz . Ry . Rx as three rows: box axes to world (column k is the box's k-th axis)."""

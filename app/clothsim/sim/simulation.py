@@ -37,6 +37,15 @@ _FRAMES = integer(ge=0)
 CUT_REST = 1e30
 
 
+def scene_field(section: str, name: str, doc: str) -> property:
+    """A property of :class:`Simulation` for field ``name`` of the scene's ``section`` ("cloth" or
+    "simulation"): read from the scene, and set through the section's setter (checked, then the
+    simulation re-planned)."""
+    setter = "_set_cloth" if section == "cloth" else "_set_sim"
+    return property(lambda self: getattr(getattr(self.scene, section), name),
+                    lambda self, value: getattr(self, setter)(name, value), doc=doc)
+
+
 class Simulation:
     """A cloth scene being simulated.
 
@@ -114,29 +123,15 @@ class Simulation:
         self.scene = self.scene.with_simulation(**{name: check_field("simulation", name, value)})
         self._replan()
 
-    ks = property(lambda self: self.scene.cloth.ks, lambda self, v: self._set_cloth("ks", v),
-                  doc="Spring constant (N/m, >= 0); bending springs use 0.2 * ks.")
-    density = property(lambda self: self.scene.cloth.density, lambda self, v: self._set_cloth("density", v),
-                       doc="Area density (kg/m^2, > 0); mass per point = width*height*density/N.")
-    damping = property(lambda self: self.scene.cloth.damping, lambda self, v: self._set_cloth("damping", v),
-                       doc="Damping in percent (0..100) of velocity removed per substep.")
-    enable_structural = property(lambda self: self.scene.cloth.enable_structural,
-                                 lambda self, v: self._set_cloth("enable_structural", v),
-                                 doc="Structural springs on (True) or off.")
-    enable_shearing = property(lambda self: self.scene.cloth.enable_shearing,
-                               lambda self, v: self._set_cloth("enable_shearing", v),
-                               doc="Shearing springs on (True) or off.")
-    enable_bending = property(lambda self: self.scene.cloth.enable_bending,
-                              lambda self, v: self._set_cloth("enable_bending", v),
-                              doc="Bending springs on (True) or off.")
-    gravity = property(lambda self: self.scene.simulation.gravity, lambda self, v: self._set_sim("gravity", v),
-                       doc="External acceleration (m/s^2), three finite numbers.")
-    frames_per_sec = property(lambda self: self.scene.simulation.frames_per_sec,
-                              lambda self, v: self._set_sim("frames_per_sec", v),
-                              doc="Frames per simulated second (> 0).")
-    simulation_steps = property(lambda self: self.scene.simulation.simulation_steps,
-                                lambda self, v: self._set_sim("simulation_steps", v),
-                                doc="Substeps per frame (an integer >= 1).")
+    ks = scene_field("cloth", "ks", "Spring constant (N/m, >= 0); bending springs use 0.2 * ks.")
+    density = scene_field("cloth", "density", "Area density (kg/m^2, > 0); mass per point = width*height*density/N.")
+    damping = scene_field("cloth", "damping", "Damping in percent (0..100) of velocity removed per substep.")
+    enable_structural = scene_field("cloth", "enable_structural", "Structural springs on (True) or off.")
+    enable_shearing = scene_field("cloth", "enable_shearing", "Shearing springs on (True) or off.")
+    enable_bending = scene_field("cloth", "enable_bending", "Bending springs on (True) or off.")
+    gravity = scene_field("simulation", "gravity", "External acceleration (m/s^2), three finite numbers.")
+    frames_per_sec = scene_field("simulation", "frames_per_sec", "Frames per simulated second (> 0).")
+    simulation_steps = scene_field("simulation", "simulation_steps", "Substeps per frame (an integer >= 1).")
 
     @property
     def wind(self) -> tuple:
