@@ -100,6 +100,18 @@ def air_velocity(rows: np.ndarray, modes: np.ndarray, w: int, x: float, y: float
 
 
 @njit(inline="always", **KERNEL)
+def _at(pos: np.ndarray, p: int) -> tuple[float, float, float]:
+    """Point ``p``'s coordinates."""
+    return pos[0, p], pos[1, p], pos[2, p]
+
+
+@njit(inline="always", **KERNEL)
+def _rows(a: np.ndarray, r: int, lo: int, hi: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Rows ``r``, ``r + 1`` and ``r + 2`` of ``a`` over columns ``lo`` to ``hi``: an x, y, z triple."""
+    return a[r, lo:hi], a[r + 1, lo:hi], a[r + 2, lo:hi]
+
+
+@njit(inline="always", **KERNEL)
 def wind_chunk(pos: np.ndarray, last: np.ndarray, wind: tuple, t: float, c: int) -> None:
     """Work item ``c``: a third of the wind force of each triangle of the c-th range into
     ``wind.tforce``. ``wind`` is a :class:`Wind`.
@@ -121,46 +133,27 @@ def wind_chunk(pos: np.ndarray, last: np.ndarray, wind: tuple, t: float, c: int)
         a = tris[0, k]
         b = tris[1, k]
         d = tris[2, k]
-        ax = pos[0, a]
-        ay = pos[1, a]
-        az = pos[2, a]
-        bx = pos[0, b]
-        by = pos[1, b]
-        bz = pos[2, b]
-        cx = pos[0, d]
-        cy = pos[1, d]
-        cz = pos[2, d]
+        ax, ay, az = _at(pos, a)
+        bx, by, bz = _at(pos, b)
+        cx, cy, cz = _at(pos, d)
         sc[0, k] = (ax + bx + cx) * third
         sc[1, k] = (ay + by + cy) * third
         sc[2, k] = (az + bz + cz) * third
         sc[3, k] = (ax - last[0, a] + bx - last[0, b] + cx - last[0, d]) * inv
         sc[4, k] = (ay - last[1, a] + by - last[1, b] + cy - last[1, d]) * inv
         sc[5, k] = (az - last[2, a] + bz - last[2, b] + cz - last[2, d]) * inv
-        ex = bx - ax
-        ey = by - ay
-        ez = bz - az
-        fx = cx - ax
-        fy = cy - ay
-        fz = cz - az
+        ex, ey, ez = bx - ax, by - ay, bz - az
+        fx, fy, fz = cx - ax, cy - ay, cz - az
         sc[6, k] = ey * fz - ez * fy
         sc[7, k] = ez * fx - ex * fz
         sc[8, k] = ex * fy - ey * fx
     n = hi - lo
-    px = sc[0, lo:hi]
-    py = sc[1, lo:hi]
-    pz = sc[2, lo:hi]
-    vx = sc[3, lo:hi]
-    vy = sc[4, lo:hi]
-    vz = sc[5, lo:hi]
-    nx = sc[6, lo:hi]
-    ny = sc[7, lo:hi]
-    nz = sc[8, lo:hi]
-    ux = sc[9, lo:hi]
-    uy = sc[10, lo:hi]
-    uz = sc[11, lo:hi]
-    ox = wind.tforce[0, lo:hi]
-    oy = wind.tforce[1, lo:hi]
-    oz = wind.tforce[2, lo:hi]
+    # the gathered rows of this range: centroids, velocities, cross products, air; the forces
+    px, py, pz = _rows(sc, 0, lo, hi)
+    vx, vy, vz = _rows(sc, 3, lo, hi)
+    nx, ny, nz = _rows(sc, 6, lo, hi)
+    ux, uy, uz = _rows(sc, 9, lo, hi)
+    ox, oy, oz = _rows(wind.tforce, 0, lo, hi)
     for j in range(n):
         ox[j] = 0.0
         oy[j] = 0.0
