@@ -37,6 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="run on an existing Dask cluster, e.g. tcp://host:8786 (pip install 'clothsim[cluster]')")
     p.add_argument("--video", action="store_true", help="dataset: also write runs/<id>.mp4 of the sampled frames")
+    # (the dataset's options: alike in shape, not in meaning, to render's, as argparse declarations are)
     p.add_argument("--views", type=int, default=0, metavar="N",
                    help="dataset: draw every sampled frame from N fixed cameras (the scene's render.views, else "
                         "drawn around the cloth from the run's seed) into runs/<id>/")

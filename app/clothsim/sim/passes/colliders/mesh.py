@@ -99,29 +99,35 @@ _LONGER = 1.0 + 1e-9
 FACE, VERTEX_A, VERTEX_B, VERTEX_C, EDGE_AB, EDGE_BC, EDGE_CA = 0, 1, 2, 3, 4, 5, 6
 
 
+@njit(inline="always", **EXACT)
+def _edge_dots(abx: float, aby: float, abz: float, acx: float, acy: float, acz: float, qx: float, qy: float,
+               qz: float) -> tuple[float, float]:
+    """(ab . q, ac . q): where q, the point seen from one corner, lies along the triangle's two
+    edges from a (Ericson's d1..d6, in the same order of operations)."""
+    return abx * qx + aby * qy + abz * qz, acx * qx + acy * qy + acz * qz
+
+
 @njit(**EXACT)
 def closest_on_triangle(px: float, py: float, pz: float, ax: float, ay: float, az: float, bx: float, by: float,
                         bz: float, cx: float, cy: float, cz: float) -> tuple[float, float, float, int]:
     """The point of triangle abc closest to p and the feature it lies on (Ericson 5.1.5)."""
+    # The corners' and the edges' regions are tested alike, one after another in the book's
+    # order (the duplicate-code scan sees the edges' three tests as near-copies): each edge's
+    # test has its own weight and its own early return, and folding them into a loop over the
+    # edges would only hide that order.
     abx, aby, abz = bx - ax, by - ay, bz - az
     acx, acy, acz = cx - ax, cy - ay, cz - az
-    apx, apy, apz = px - ax, py - ay, pz - az
-    d1 = abx * apx + aby * apy + abz * apz
-    d2 = acx * apx + acy * apy + acz * apz
+    d1, d2 = _edge_dots(abx, aby, abz, acx, acy, acz, px - ax, py - ay, pz - az)
     if d1 <= 0.0 and d2 <= 0.0:
         return ax, ay, az, VERTEX_A
-    bpx, bpy, bpz = px - bx, py - by, pz - bz
-    d3 = abx * bpx + aby * bpy + abz * bpz
-    d4 = acx * bpx + acy * bpy + acz * bpz
+    d3, d4 = _edge_dots(abx, aby, abz, acx, acy, acz, px - bx, py - by, pz - bz)
     if d3 >= 0.0 and d4 <= d3:
         return bx, by, bz, VERTEX_B
     vc = d1 * d4 - d3 * d2
     if vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:
         v = d1 / (d1 - d3)
         return ax + v * abx, ay + v * aby, az + v * abz, EDGE_AB
-    cpx, cpy, cpz = px - cx, py - cy, pz - cz
-    d5 = abx * cpx + aby * cpy + abz * cpz
-    d6 = acx * cpx + acy * cpy + acz * cpz
+    d5, d6 = _edge_dots(abx, aby, abz, acx, acy, acz, px - cx, py - cy, pz - cz)
     if d6 >= 0.0 and d5 <= d6:
         return cx, cy, cz, VERTEX_C
     vb = d5 * d2 - d1 * d6
@@ -298,6 +304,9 @@ def gather_near(mesh: tuple, m: int, p: int, qx: float, qy: float, qz: float) ->
     near = mesh.near_tris
     room = near.shape[2]
     count = 0
+    # The walk over the cells in reach is the fold's too (:func:`_grid_fold`, a point without a
+    # list): Numba cannot pass a loop's body, and the two bodies differ (a list kept without
+    # duplicates, and the nearest triangle folded), so each spells the walk out.
     for cz in range(z0, z1 + 1):
         for cy in range(y0, y1 + 1):
             for cx in range(x0, x1 + 1):
