@@ -529,7 +529,7 @@ def test_the_memory_check_counts_each_meshs_lists_per_point(tmp_path, monkeypatc
 
 def test_the_lists_rows_are_not_a_power_of_two_bytes_long():
     # rows a power of two bytes apart fall in a fraction of the caches' sets, where two arrays can
-    # evict each other (docs/performance.md, "The lists' rows and the caches' sets")
+    # evict each other (docs/performance-meshes.md, "The lists' rows")
     group = mesh_group(load_scene("mesh"))
     for rows in (group.near_d, group.near_pl):
         stride = rows.strides[1]

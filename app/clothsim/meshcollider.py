@@ -50,7 +50,7 @@ NEAR_PLANES = 16
 #: power of two bytes long. The pass reads the first entries of one point's rows after another's;
 #: rows 512 B apart fall in one eighth of the caches' sets, and where a process's arrays happened to
 #: start at the same offset within those sets they evicted each other and the cloth's own arrays
-#: (see docs/performance.md, "The lists' rows and the caches' sets").
+#: (see docs/performance-meshes.md, "The lists' rows").
 NEAR_D_WIDTH = NEAR_ROOM + 1
 #: Numbers a separating plane takes in its row: unit normal, offset, and its triangle's distance
 #: (a copy of the list's, read in the same cache line as the plane it decides about); 40 B, so a

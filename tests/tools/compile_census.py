@@ -1,5 +1,5 @@
 """A pytest plugin that records every Numba compile made in the test processes, test by test, as
-JSON lines: which tests pay for which kernels on a cold cache (docs/performance.md, The test
+JSON lines: which tests pay for which kernels on a cold cache (docs/performance-compile.md, The test
 suite). Compiles inside a test's subprocesses (the command-line tests) are not seen.
 
     PYTHONPATH=tests/tools COMPILE_CENSUS=/tmp/census.jsonl .venv/bin/python -m pytest -p compile_census

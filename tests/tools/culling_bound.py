@@ -2,7 +2,7 @@
 ``python tests/tools/culling_bound.py --scene sphere``.
 
 llvmpipe shades every fragment it rasterises under multisampling, whatever its depth, so the
-displaced looks pay for every layer of their puffed folds (docs/performance.md, "Displaced looks").
+displaced looks pay for every layer of their puffed folds (docs/performance-rendering.md, "Displaced looks").
 This measures what drawing only the triangles that can be seen would give, on draped states of a
 scene (frames 65, 70, ... after 60 warm-up frames): a triangle counts as seen where its id wins the
 depth test in an id pass without multisampling (the look's own vertex stage, a fragment stage that

@@ -229,8 +229,8 @@ def _unowned(context, builder, ty: types.Type, value: Any) -> Any:  # noqa: ANN0
     """``value`` with every array in it detached from its owner (no meminfo, no parent object), as
     a parallel loop hands arrays to its threads: Numba then counts no references to them. Counted
     references cost an atomic add on a counter the threads share at every array the callee passes
-    on, which made the team's frames several times slower (docs/performance.md, "The team's
-    launcher")."""
+    on, which made the team's frames several times slower (docs/performance-team.md, "One
+    launch for every plan")."""
     if isinstance(ty, types.BaseTuple):
         for i, t in enumerate(ty.types):
             value = builder.insert_value(value, _unowned(context, builder, t, builder.extract_value(value, i)), i)
@@ -261,7 +261,7 @@ def packed_value(value: Any, ty: types.Type) -> Any:
     """``value`` (of Numba type ``ty``: tuples, named tuples, arrays and scalars) laid out as
     :func:`stack_address` lays it out, arrays detached as there, in a buffer of this process: for
     :func:`load_value` in a kernel called by address, without a kernel compiled for ``ty`` to copy
-    it (the team's plans: about 0.9 s of compiling a plan, docs/performance.md). The address is
+    it (the team's plans: about 0.9 s of compiling a plan, docs/history/team.md). The address is
     ``ctypes.addressof`` of the result, valid while the result and ``value``'s arrays live."""
     import ctypes
 

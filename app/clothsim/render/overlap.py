@@ -8,8 +8,8 @@ counting +1), and a simple curve winds at most once around any point. Triangles 
 edge or a corner then meet only there, where the rasteriser's fill rule gives each sample to one
 of them, so every sample is drawn by at most one triangle and the depth test would pass every
 fragment it is given: the image is the same bytes without it. On llvmpipe with multisampling the
-test runs per sample and its buffer is cleared every frame (what that costs: docs/performance.md,
-"A clip end to end").
+test runs per sample and its buffer is cleared every frame (what that costs: docs/performance-rendering.md,
+"Frames drawn without the depth test").
 
 The test is made on the positions the renderer uploads (float32), projected in float64, with a
 margin of :data:`SLACK` pixels per coordinate for the driver's float32 transform and its snapping

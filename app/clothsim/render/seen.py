@@ -7,7 +7,7 @@ quarters of their triangles are hidden, and all of them were shaded. So on such 
 of those looks is first drawn cheaply: without multisampling, with the look's own vertex stage and
 a fragment stage that writes each triangle's number (``glsl/ids.frag``), into a framebuffer of
 the image's size. The numbers left there are the triangles that win the depth test at some pixel
-centre, and the frame is drawn from those alone (docs/performance.md, "Displaced looks").
+centre, and the frame is drawn from those alone (docs/performance-rendering.md, "Displaced looks").
 
 The image changes a little, on purpose: the multisampled image looks at four points of a pixel and
 the id pass at its centre, so a triangle that wins only at some of those points and at no centre

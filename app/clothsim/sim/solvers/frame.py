@@ -21,15 +21,15 @@ The passes every plan runs (springs, gather, Verlet, Provot's two phases) and th
 (``ClothState.calls``), and each collider kind's passes (``Colliders.calls``, a row per kind) are
 kernels of their own that the member calls by address, like the spec hash's query and the mesh pass:
 each is compiled once for every plan that has it, and none is linked into the member and re-
-optimised there, so a plan compiles little more than its own loop (docs/performance.md, "Passes
-called by address").
+optimised there, so a plan compiles little more than its own loop (docs/history/team.md,
+"Passes called by address").
 
 A frame starts in Python: :func:`run_substeps` calls the team's parallel loop, :func:`_launch`,
 with the address of the plan laid out as Numba lays it out
 (:func:`~clothsim.jit.internals.packed_value`, once per plan); the loop is one compiled kernel for
 every plan, and each of its threads calls :func:`_enter` (per plan, small), which reads the plan
 back and calls the member. A parallel loop given the plan's groups themselves was compiled per
-plan, and slowly for plans of many groups (docs/performance.md, "The team's launcher"); a small
+plan, and slowly for plans of many groups (docs/history/team.md, "The team's launcher"); a small
 kernel per plan that copied it to its stack cost about 0.9 s of compiling a plan.
 """
 
@@ -434,7 +434,7 @@ def _enter(me: int, working: int, steps: int, plan_at: int, member: int, sync: n
 def _launch(steps: int, plan_at: int, member: int, enter: int, sync: np.ndarray, size: int, passes: int) -> None:
     """The team's parallel loop: each thread answers the roll call and enters the member. It sees
     the plan only as an address, so it is compiled once for every plan (given the plan's groups,
-    it compiled for each plan, slowly for plans of many groups: docs/performance.md)."""
+    it compiled for each plan, slowly for plans of many groups: docs/performance-team.md)."""
     for m in prange(size):
         working = roll_call(sync, size)
         if working != 0:
