@@ -20,6 +20,9 @@ A collider kind is one module of this package (:mod:`.sphere` is the simplest) t
   :data:`~clothsim.jit.CHUNKS`) of the free points against its reachable colliders. A point's
   correction depends on that point alone, so the work items may run on any thread.
 
+The kinds whose colliders are one float64 row each (sphere, plane, capsule, box) take their group
+type, their ``pack`` and all three functions from :mod:`.rows` and write only their two tests.
+
 Its line in :data:`clothsim.colliders.KINDS` (the scene's side: key, rule, JSON, and the name of
 this module) is all the simulator needs. A plan holds the groups of the kinds its scene has, as one
 tuple in registry order. Each kind's three functions are compiled on their own for its group's
