@@ -342,6 +342,8 @@ def test_every_quoted_clothsim_command_parses() -> None:
     # (`clothsim compile --jobs`), which name things rather than run them, and the error examples.
     parser = build_parser()
     known = dict(commands(parser))
+    for sub in (parser, *known.values()):
+        sub.allow_abbrev = False  # a flag quoted must be the flag's whole name, not a prefix of it
     problems, checked = [], 0
     for page in PAGES:
         history = HISTORY in page.parents
