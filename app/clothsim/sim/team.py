@@ -52,6 +52,8 @@ ARRIVALS = 56
 LAPS = 64
 #: Laps a frame may time (the barriers of one substep).
 MOST_LAPS = 16
+#: The ``lap`` of a timed frame's first barrier, which only starts the clock.
+START = -1
 SYNC_SIZE = LAPS + 2 * MOST_LAPS
 
 _GATHERING, _TEAM = 0, 1
@@ -161,7 +163,9 @@ def barrier(sync: np.ndarray, size: int, generation: int, lap: int) -> int:
 
     In a timed frame (``sync[TIMED]``) each member adds its clock on arriving, and the last to
     arrive adds to the slots of ``lap`` (the pass the barrier ends) the time since the last
-    release and the members' time spent waiting (:func:`_lap_done`).
+    release and the members' time spent waiting (:func:`_lap_done`). ``lap`` :data:`START` only
+    starts the clock once the whole team is there: a member the system starts late would
+    otherwise have its lateness counted as the others' waiting in the first lap.
     """
     timed = sync[TIMED] != 0
     if size == 1:
@@ -202,9 +206,10 @@ def barrier(sync: np.ndarray, size: int, generation: int, lap: int) -> int:
 def _lap_done(sync: np.ndarray, lap: int, now: int, waited: int) -> None:
     # ``lap`` ends at ``now`` (its last member has arrived), the members having waited ``waited``
     # ns at its barrier; the next lap starts
-    k = LAPS + 2 * lap
-    sync[k] += now - sync[RELEASED]
-    sync[k + 1] += waited
+    if lap >= 0:
+        k = LAPS + 2 * lap
+        sync[k] += now - sync[RELEASED]
+        sync[k + 1] += waited
     sync[RELEASED] = now
 
 

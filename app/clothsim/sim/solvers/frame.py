@@ -43,7 +43,7 @@ import numpy as np
 from numba import njit, prange, types
 
 from ...jit import CHUNKS, KERNEL, PARALLEL
-from ...jit.internals import call_native, load_value, monotonic_ns, native_address, stack_address, type_ref
+from ...jit.internals import call_native, load_value, native_address, stack_address, type_ref
 
 from ..passes.forces import force_gather, force_work
 from ..passes.colliders import SET_COLLIDE, SET_POSE, SET_REACHABLE, kind_kernels, set_kernels
@@ -58,7 +58,7 @@ from ..passes.contact import CUT, FLAG, STALE, contact_bound, contact_joined, co
     fall_back, overflowed
 from ..passes.selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from ..state import Plan
-from ..team import ABORT, FAILED, RELEASED, TIMED, atomic_cas, barrier, roll_call, share
+from ..team import ABORT, FAILED, START, TIMED, atomic_cas, barrier, roll_call, share
 
 #: Pass bits of :func:`run_substeps`: spring forces and Verlet, self-collision, colliders, Provot,
 #: the contact mode's pass; and PASS_TIMED, which times every pass of the frame (team.barrier).
@@ -134,9 +134,11 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
         # whether this substep rebuilds the contact reference, and the member's parts of it
         stale = np.zeros(FLAG, np.int64)
     gen = np.int64(0)
-    if member == 0 and sync[TIMED] != 0:
-        # a timed frame's first lap starts here, once the team is together (see team.barrier)
-        sync[RELEASED] = monotonic_ns()
+    if sync[TIMED] != 0:
+        # a timed frame's first lap starts once the team is together
+        gen = barrier(sync, size, gen, np.int64(START))
+        if gen < 0:
+            return
     for substep in range(steps):
         if integrate:
             lo, hi = share(jobs, member, size)
