@@ -348,3 +348,20 @@ def test_two_versions_sharing_a_cache_folder_never_load_each_others_code(tmp_pat
         loaded = None
     assert loaded in (None, "this version's code")
     assert theirs.load("key") == "the other version's code"
+
+
+@pytest.mark.parametrize(("mode", "expected"), [("spec", "FIRST_RUN_SECONDS"), ("contact", "CONTACT_FIRST_RUN_SECONDS")])
+def test_the_notice_estimates_the_compile_of_the_mode_a_run_uses(monkeypatch: pytest.MonkeyPatch, mode: str,
+                                                                expected: str) -> None:
+    # the contact mode's kernels take most of a cold start: its notice must not promise a plain scene's
+    import io
+
+    import clothsim
+    from clothsim.jit import watch
+
+    notice = watch.CompileNotice(io.StringIO())
+    monkeypatch.setattr(watch, "_installed", notice)
+    scene = clothsim.load_scene("selfCollision")
+    clothsim.Simulation(scene.with_simulation(self_collision=mode))
+    assert notice.estimate == getattr(watch, expected)
+    assert watch.CONTACT_FIRST_RUN_SECONDS > 3 * watch.FIRST_RUN_SECONDS

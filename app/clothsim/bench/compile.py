@@ -27,6 +27,7 @@ COMMANDS: dict[str, list[str]] = {
     "capsule": ["simulate", "capsule", "--frames", "10", "--out", "{tmp}/s.npz"],
     "tablecloth": ["simulate", "tablecloth", "--frames", "10", "--out", "{tmp}/s.npz"],
     "mesh": ["simulate", "mesh", "--frames", "10", "--out", "{tmp}/s.npz"],
+    "selfcollision": ["simulate", "selfCollision", "--frames", "10", "--out", "{tmp}/s.npz"],
     "contact": ["simulate", "selfCollision", "--self-collision", "contact", "--frames", "10", "--out", "{tmp}/s.npz"],
 }
 _RUNNER = ("import sys; from clothsim.cli.compile import record_command; "

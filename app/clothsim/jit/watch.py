@@ -17,7 +17,10 @@ from numba.core import event
 
 #: Cold compile of the frame kernel as a user first meets it (``clothsim simulate pinned2``, every
 #: cache empty, measured with ``clothsim bench compile`` on a 2-core machine).
-FIRST_RUN_SECONDS = 15
+FIRST_RUN_SECONDS = 10
+#: The same for a scene in the contact self-collision mode, whose kernels take most of it
+#: (``clothsim bench compile --commands contact``).
+CONTACT_FIRST_RUN_SECONDS = 65
 
 
 @dataclass(frozen=True)
@@ -142,6 +145,13 @@ class CompileNotice(event.Listener):
 
 
 _installed: CompileNotice | None = None
+
+
+def expect(seconds: float) -> None:
+    """Raise the installed notice's estimate to ``seconds`` (a run about to compile more than a
+    plain scene); nothing if no notice is installed or it has already been shown."""
+    if _installed is not None and not _installed.announced:
+        _installed.estimate = max(_installed.estimate, seconds)
 
 
 def install_notice() -> CompileNotice:

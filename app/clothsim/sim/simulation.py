@@ -262,6 +262,10 @@ class Simulation:
         self._gravity = np.asarray(sim.gravity, dtype=np.float64)
         self._keep = 1.0 - cloth.damping / 100.0
         self._self_mode = _SELF_MODES[sim.self_collision]
+        if self._self_mode == MODE_CONTACT:
+            from ..jit.watch import CONTACT_FIRST_RUN_SECONDS, expect
+
+            expect(CONTACT_FIRST_RUN_SECONDS)
         if sim.self_collision == "grid":
             edge = 2.0 * cloth.thickness
             self._cell = np.array([edge, edge, edge])
