@@ -67,7 +67,7 @@ STRESS_GRID = 20
 STRESS_FRAMES = 120
 #: The twist in tests: each edge a full turn in 1.2 s (done by frame 117 of 120), on a 16 x 16
 #: grid: its pins are put in place through the API before every substep, so the contact mode builds
-#: its reference at every substep there, and 20 x 20 takes 40-90 s (docs/self-collision.md has both).
+#: its reference at every substep there, and 20 x 20 takes 40-90 s (docs/history/self-collision-limits.md has both).
 STRESS_TWIST_SECONDS = 1.2
 STRESS_TWIST_GRID = 16
 
