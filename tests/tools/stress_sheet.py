@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from clothsim.bench.stress import STRESS_SCENES, StressRun
+from clothsim.bench.stress import FOLDING_SCENES as STRESS_SCENES, StressRun
 from clothsim.errors import SimulationBlowUp
 from clothsim.render import Renderer
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 from ..errors import ClothsimError, SimulationBlowUp
 from ..validate import check, integer
-from .stress import STRESS_SCENES, StressRun, self_collision_modes
+from .stress import FOLDING_SCENES, STRESS_SCENES, StressRun, self_collision_modes
 
 DEFAULT_FRAMES = 300
 DEFAULT_EVERY = 3
@@ -68,8 +68,8 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
                    help=f"count crossings after every K-th frame and the last (default {DEFAULT_EVERY})")
     p.add_argument("--grid", type=int, default=DEFAULT_GRID, metavar="N",
                    help=f"points per side of the cloth (default {DEFAULT_GRID})")
-    p.add_argument("--scenes", nargs="*", default=list(STRESS_SCENES),
-                   help=f"stress runs (default: {' '.join(STRESS_SCENES)})")
+    p.add_argument("--scenes", nargs="*", default=list(FOLDING_SCENES),
+                   help=f"stress runs, from {' '.join(STRESS_SCENES)} (default: {' '.join(FOLDING_SCENES)})")
     p.add_argument("--modes", nargs="*", help="self-collision modes (default: every mode a scene may name)")
     p.set_defaults(func=run)
 

@@ -1,6 +1,7 @@
 """The self-collision stress set: scenes where a cloth folds onto and around itself.
 
-Five runs, each on an ``n`` x ``n`` grid (50 x 50 in ``clothsim bench selfcollision``):
+Each run is on an ``n`` x ``n`` grid (50 x 50 in ``clothsim bench selfcollision``). Five where the
+cloth folds by itself, or by its pins:
 
 - ``selfCollision``: the course's vertical cloth falling in folds onto a plane;
 - ``flag``: a flag in gusty wind, folding over itself at its free end;
@@ -13,6 +14,18 @@ Five runs, each on an ``n`` x ``n`` grid (50 x 50 in ``clothsim bench selfcollis
   wrings into a rope. A scene's motion tracks are translations, so this run is driven through the
   public API: one substep per :meth:`Simulation.step` call, the pinned points set to the edges'
   turned poses (and their last positions to the poses one substep earlier) before each substep.
+
+And five where moving colliders or pins drive a cloth lying on a floor into folds and press them
+against the floor (``DRIVEN_SCENES``). In the first four a box slides along the floor and pushes
+the cloth into a heap of folds (by 0.8 s), then another collider comes down on the heap and
+presses it until 1.2 s:
+
+- ``lid``: a plane, to 3 cm over the floor;
+- ``press``: a ball 25 cm in radius, to 3 cm;
+- ``roller``: a capsule lying across the cloth, to 3 cm;
+- ``stamp``: the bundled torus lying flat, to 3.3 cm;
+- ``drag``: no collider but the floor: two corners of the cloth are dragged over it to the far
+  side and lifted, folding it onto itself.
 
 A bundled scene on another grid keeps its pins where they were (each new point is pinned when the
 nearest point of the scene's own grid is) and its thickness in proportion to the point spacing,
@@ -28,8 +41,14 @@ import numpy as np
 
 from ..scene import SIMULATION, SELF_COLLISION_MODES, Scene, load_scene
 
-#: The runs of the stress set, in the order the benchmark prints them.
-STRESS_SCENES = ("selfCollision", "flag", "heap", "push", "twist")
+#: The runs where the cloth folds by itself or by its pins (``clothsim bench selfcollision``'s default).
+FOLDING_SCENES = ("selfCollision", "flag", "heap", "push", "twist")
+#: The runs where moving colliders and pins drive the folds (see the module's docstring).
+DRIVEN_SCENES = ("lid", "press", "roller", "stamp", "drag")
+#: Every run of the stress set, in the order the benchmark prints them.
+STRESS_SCENES = FOLDING_SCENES + DRIVEN_SCENES
+#: The driven runs' floor: the cloth starts 5 cm over it, at the course's height of 1 m.
+FLOOR = 0.95
 #: The twist: seconds before the edges start turning, seconds to turn, turns of each edge, and the
 #: distance each edge moves towards the middle meanwhile (m).
 TWIST_START = 0.1
@@ -68,6 +87,52 @@ def twist_scene(n: int = 50) -> Scene:
     return replace(scene, planes=(), path="<twist>").with_simulation(gravity=(0.0, 0.0, 0.0))
 
 
+def _keyframes(start: list[float], end: list[float], t0: float = 0.15, t1: float = 1.1) -> dict:
+    # a motion held at ``start`` until t0, then in a straight line to ``end`` at t1
+    return {"keyframes": [[0.0, start], [t0, start], [t1, end]]}
+
+
+def driven_scene(name: str, n: int = 50) -> Scene:
+    """The driven run ``name`` (one of ``DRIVEN_SCENES``) on an ``n`` x ``n`` grid: the course's
+    1 m cloth, 5 cm over a floor, its thickness in proportion to the point spacing (0.0095 at
+    50 x 50)."""
+    from ..resources import data_dir
+    from ..scene import scene_from_dict
+
+    if name not in DRIVEN_SCENES:
+        raise ValueError(f"unknown driven run {name!r} (expected one of: {', '.join(DRIVEN_SCENES)})")
+    cloth = {"width": 1.0, "height": 1.0, "num_width_points": n, "num_height_points": n,
+             "thickness": 0.0095 * 49 / (n - 1), "orientation": "horizontal", "damping": 0.2, "density": 150.0,
+             "ks": 5000.0}
+    floor = {"point": [0.5, FLOOR, 0.5], "normal": [0.0, 1.0, 0.0], "friction": 0.5}
+    y = FLOOR
+    data: dict = {"cloth": cloth, "plane": floor}
+    heap = {"center": [-0.08, y + 0.06, 0.5], "half_extents": [0.05, 0.06, 0.7], "friction": 0.3,
+            "motion": _keyframes([-0.08, y + 0.06, 0.5], [0.55, y + 0.06, 0.5], t1=0.8)}
+    if name == "lid":
+        data["box"] = heap
+        data["plane"] = [floor, {"point": [0.5, y + 0.4, 0.5], "normal": [0.0, -1.0, 0.0], "friction": 0.5,
+                                 "motion": _keyframes([0.5, y + 0.4, 0.5], [0.5, y + 0.03, 0.5], 0.8, 1.2)}]
+    elif name == "press":
+        data["box"] = heap
+        data["sphere"] = {"origin": [0.72, y + 0.6, 0.5], "radius": 0.25, "friction": 0.5,
+                          "motion": _keyframes([0.72, y + 0.6, 0.5], [0.72, y + 0.28, 0.5], 0.8, 1.2)}
+    elif name == "roller":
+        data["box"] = heap
+        data["capsule"] = {"a": [0.7, y + 0.5, -0.2], "b": [0.7, y + 0.5, 1.2], "radius": 0.08, "friction": 0.3,
+                           "motion": _keyframes([0.7, y + 0.5, 0.5], [0.7, y + 0.11, 0.5], 0.8, 1.2)}
+    elif name == "stamp":
+        data["box"] = heap
+        data["mesh"] = {"path": str(data_dir("scenes") / "torus.obj"), "scale": 0.8,
+                        "translate": [0.95, y + 0.5, 0.5], "friction": 0.3,
+                        "motion": _keyframes([0.95, y + 0.5, 0.5], [0.95, y + 0.105, 0.5], 0.8, 1.2)}
+    else:  # drag
+        cloth["pinned"] = [[0, 0], [n - 1, 0]]
+        cloth["pin_motion"] = {"keyframes": [[0.0, [0.0, 0.0, 0.0]], [0.15, [0.0, 0.0, 0.0]],
+                                             [0.9, [0.0, 0.0, 0.85]], [1.2, [0.0, 0.25, 0.85]]]}
+    return scene_from_dict(data, f"<{name}>")
+
+
 def twist_pose(rest: np.ndarray, top: np.ndarray, t: float, seconds: float = TWIST_SECONDS) -> np.ndarray:
     """The pinned points at time ``t``: ``rest`` (P, 3) turned about the vertical line x = 0.5,
     z = 0, the top ones (``top``, a mask) one way and the others the other way, TWIST_TURNS turns
@@ -103,7 +168,12 @@ class StressRun:
             raise ValueError(f"unknown stress scene {name!r} (expected one of: {', '.join(STRESS_SCENES)})")
         self.name = name
         self.mode = mode
-        scene = twist_scene(n) if name == "twist" else resized(load_scene(name), n)
+        if name == "twist":
+            scene = twist_scene(n)
+        elif name in DRIVEN_SCENES:
+            scene = driven_scene(name, n)
+        else:
+            scene = resized(load_scene(name), n)
         self.steps = scene.simulation.simulation_steps
         self._substep: Callable[[], None] | None = None
         if name == "twist":
