@@ -136,7 +136,7 @@ def test_bench_compile_rejects_an_unknown_command() -> None:
     done = run_cli("bench", "compile", "--commands", "simulate,nope")
     assert done.returncode == 2
     assert done.stderr.strip().splitlines() == [
-        "clothsim: error: --commands: unknown command 'nope' (expected some of: simulate, render, sphere, grid, xpbd, flag, capsule, tablecloth, mesh, contact)"]
+        "clothsim: error: --commands: unknown command 'nope' (expected some of: simulate, render, sphere, grid, xpbd, flag, capsule, tablecloth, mesh, selfcollision, contact)"]
 
 @pytest.mark.parametrize("jobs, message", [
     ("0", "clothsim: error: --jobs: must be >= 1, got 0"),

@@ -107,8 +107,9 @@ def driven_scene(name: str, n: int = 50) -> Scene:
     floor = {"point": [0.5, FLOOR, 0.5], "normal": [0.0, 1.0, 0.0], "friction": 0.5}
     y = FLOOR
     data: dict = {"cloth": cloth, "plane": floor}
-    heap = {"center": [-0.08, y + 0.06, 0.5], "half_extents": [0.05, 0.06, 0.7], "friction": 0.3,
-            "motion": _keyframes([-0.08, y + 0.06, 0.5], [0.55, y + 0.06, 0.5], t1=0.8)}
+    # the box reaches into the floor: a point it meets is pushed out of its front, never under it
+    heap = {"center": [-0.08, y + 0.02, 0.5], "half_extents": [0.05, 0.1, 0.7], "friction": 0.3,
+            "motion": _keyframes([-0.08, y + 0.02, 0.5], [0.55, y + 0.02, 0.5], t1=0.8)}
     if name == "lid":
         data["box"] = heap
         data["plane"] = [floor, {"point": [0.5, y + 0.4, 0.5], "normal": [0.0, -1.0, 0.0], "friction": 0.5,

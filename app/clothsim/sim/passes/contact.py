@@ -309,6 +309,9 @@ def _keep_ee(c: Contact, e1: int, e2: int, u: float, v: float, nx: float, ny: fl
              dmin: np.ndarray, nee: int, end: int) -> int:
     """An edge-edge pair at distance ``d`` (segment parameters, unnormalised normal), as
     :func:`_keep_pt`; returns the pairs kept."""
+    # kept apart from _keep_pt, which it mirrors line for line (the duplicate-code scan pairs
+    # them): the two pair kinds have their own corners, arrays and counters, and one function
+    # over both would branch on the kind in the rebuild's innermost loop
     if d >= c.radius:
         return nee
     edges = c.edges
