@@ -455,7 +455,7 @@ def test_a_pin_put_out_of_its_ball_through_the_api_is_counted() -> None:
     assert c.meta[UNSAFE] == 0
     sim.positions[pin, 0] += 3.0 * float(np.sqrt(c.rho2[pin])) + 1e-6
     sim.step(1)
-    assert c.meta[UNSAFE] == 1
+    assert c.meta[UNSAFE] == 1 and sim.unsafe_substeps == 1
     sim.reset()
     sim.positions[pin, 0] += 0.02
     sim.step(1)
@@ -613,3 +613,26 @@ def test_the_memory_check_counts_the_contact_modes_arrays_and_a_rebuilds_tables(
     scene_module.check_memory(spec)
     with pytest.raises(SceneError, match="40x40 grid would need about"):
         scene_module.check_memory(contact)
+
+
+def test_simulate_says_when_a_pin_outran_the_bound(tmp_path: Path) -> None:
+    # a pin track that jumps 0.4 m in 2 ms (0.15 m a substep, several balls): the contact mode
+    # cannot bound those substeps; the command counts them on stderr and still writes its file
+    from conftest import run_cli
+
+    scene = {"cloth": {"width": 1.0, "height": 1.0, "num_width_points": 12, "num_height_points": 12,
+                       "thickness": 0.02, "orientation": "horizontal", "damping": 0.2, "density": 15.0, "ks": 5000.0,
+                       "pinned": [[0, 0]],
+                       "pin_motion": {"keyframes": [[0.0, [0, 0, 0]], [0.05, [0, 0, 0]], [0.052, [0.0, 0.0, 0.4]]]}},
+             "simulation": {"self_collision": "contact"}}
+    path = tmp_path / "fast.json"
+    path.write_text(json.dumps(scene))
+    done = run_cli("simulate", str(path), "--frames", "10", "--out", str(tmp_path / "out.npz"))
+    assert done.returncode == 0, done.stderr
+    warned = [line for line in done.stderr.splitlines() if "warning" in line]
+    assert len(warned) == 1 and "a pin moved farther than the bound allows" in warned[0], done.stderr
+    assert (tmp_path / "out.npz").exists()
+    quiet = dict(scene, cloth=dict(scene["cloth"], pin_motion={"velocity": [0.0, 0.0, 0.1]}))
+    path.write_text(json.dumps(quiet))
+    done = run_cli("simulate", str(path), "--frames", "10", "--out", str(tmp_path / "out.npz"))
+    assert done.returncode == 0 and "warning" not in done.stderr, done.stderr

@@ -165,4 +165,8 @@ def run_simulate(args: argparse.Namespace) -> int:
         print(profiler.report())
     print(f"simulated {sim.frame} frames ({sim.frame / scene.simulation.frames_per_sec:.3f} s of cloth) "
           f"in {elapsed:.2f} s; wrote {out}", file=sys.stderr)
+    if sim.unsafe_substeps:
+        print(f"clothsim: warning: self_collision \"contact\": in {sim.unsafe_substeps} substep"
+              f"{'s' if sim.unsafe_substeps != 1 else ''} a pin moved farther than the bound allows; "
+              f"the cloth may cross itself there ({sim.crossings()} crossings at the end)", file=sys.stderr)
     return 0

@@ -58,6 +58,11 @@ class Simulation:
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
+        if scene.simulation.self_collision == "contact":
+            # said before the first kernel compiles (the collider plan below may compile one)
+            from ..jit.watch import CONTACT_FIRST_RUN_SECONDS, expect
+
+            expect(CONTACT_FIRST_RUN_SECONDS)
         cloth = scene.cloth
         self.nw = cloth.num_width_points
         self.nh = cloth.num_height_points
@@ -194,6 +199,15 @@ class Simulation:
         return count_crossings(self.positions, self.nw, self.nh)
 
     @property
+    def unsafe_substeps(self) -> int:
+        """Substeps so far in which the contact self-collision mode could not bound the cloth's
+        motion: a pinned point moved farther than its bound allows in one substep, by its
+        ``pin_motion`` or put there through the API. The cloth may have crossed itself there
+        (:meth:`crossings` says whether it did). Always 0 in the other modes."""
+        contact = self._kernel_args.contact
+        return 0 if contact is None else int(contact.meta[UNSAFE])
+
+    @property
     def dt(self) -> float:
         """Substep length in seconds: 1 / (frames_per_sec * simulation_steps)."""
         s = self.scene.simulation
@@ -262,10 +276,6 @@ class Simulation:
         self._gravity = np.asarray(sim.gravity, dtype=np.float64)
         self._keep = 1.0 - cloth.damping / 100.0
         self._self_mode = _SELF_MODES[sim.self_collision]
-        if self._self_mode == MODE_CONTACT:
-            from ..jit.watch import CONTACT_FIRST_RUN_SECONDS, expect
-
-            expect(CONTACT_FIRST_RUN_SECONDS)
         if sim.self_collision == "grid":
             edge = 2.0 * cloth.thickness
             self._cell = np.array([edge, edge, edge])
