@@ -351,5 +351,23 @@ def test_bench_selfcollision_prints_a_row_per_scene_and_mode(tmp_path: Path) -> 
     want = measure("selfCollision", "off", 40, 20, 10)
     assert [int(x) for x in rows[0][3:6]] == [want.worst[1], want.worst[0], want.samples[-1][1]]
     assert [f for f, _ in want.samples] == [20, 40] and len(want.ms) == 40
+    assert rows[0][6:8] == ["-", "-"]
     bad = _cli("bench", "selfcollision", "--modes", "nosuch", cwd=tmp_path)
     assert bad.returncode == 2 and bad.stderr.startswith("clothsim: error: --modes: unknown self-collision mode 'nosuch'")
+
+
+def test_bench_selfcollision_gives_the_contact_modes_rebuilds_and_their_cost() -> None:
+    # timed frames give the same numbers as plain ones; the rebuilds are the group's counter
+    from clothsim.bench.selfcollision import measure
+    from clothsim.bench.stress import StressRun
+    from clothsim.sim.passes.contact import REBUILDS
+
+    got = measure("selfCollision", "contact", 30, 30, 12)
+    plain = StressRun("selfCollision", "contact", 12)
+    for _ in range(30):
+        plain.frame()
+    assert got.samples == [(30, plain.crossings())]
+    assert got.rebuilds == plain.sim._kernel_args.contact.meta[REBUILDS] > 0
+    assert got.search_ms is not None and 0.0 < got.search_ms < sum(got.ms)
+    twist = measure("twist", "contact", 2, 2, 8)
+    assert twist.rebuilds > 0 and twist.search_ms is None

@@ -34,6 +34,10 @@ class StressResult:
     ms: list[float] = field(default_factory=list)
     samples: list[tuple[int, int]] = field(default_factory=list)
     blew_up: int | None = None
+    #: contact mode: whole rebuilds of the reference, and the ms its search took in all (None
+    #: where the frame's passes are not timed: the twist, whose pins are put through the API)
+    rebuilds: int = 0
+    search_ms: float | None = None
 
     @property
     def worst(self) -> tuple[int, int]:
@@ -44,18 +48,31 @@ class StressResult:
 def measure(scene: str, mode: str, frames: int, every: int = 1, grid: int = DEFAULT_GRID) -> StressResult:
     """Run stress scene ``scene`` in self-collision ``mode`` for ``frames`` frames; count crossings
     after frames every, 2*every, ... and after the last."""
+    from ..sim.passes.contact import REBUILDS
+    from ..sim.profile import FrameLaps
+    from ..sim.solvers.frame import LAP_NAMES
+
     run = StressRun(scene, mode, grid)
     out = StressResult(scene, mode)
+    contact = run.sim._kernel_args.contact
+    # the contact mode's frames are run with their passes timed (the same numbers, a few clock
+    # reads a barrier more) to give the search's share of them
+    laps = FrameLaps(run.sim) if contact is not None and not run.through_the_api else None
+    advance = laps.frame if laps is not None else run.frame
     for f in range(1, frames + 1):
         t0 = time.perf_counter()
         try:
-            run.frame()
+            advance()
         except SimulationBlowUp:
             out.blew_up = f
             break
         out.ms.append((time.perf_counter() - t0) * 1e3)
         if f % every == 0 or f == frames:
             out.samples.append((f, run.crossings()))
+    if contact is not None:
+        out.rebuilds = int(run.sim._kernel_args.contact.meta[REBUILDS])
+    if laps is not None:
+        out.search_ms = laps.ns[LAP_NAMES.index("contact: search"), 0] * 1e-6
     return out
 
 
@@ -87,7 +104,8 @@ def run(args: argparse.Namespace) -> int:
     for mode in modes:
         if mode not in known:
             raise ClothsimError(f"--modes: unknown self-collision mode {mode!r} (expected: {', '.join(known)})")
-    print(f"{'scene':<15}{'mode':<9}{'ms/frame':>10}{'max crossings':>15}{'at frame':>10}{'final':>8}  note")
+    print(f"{'scene':<15}{'mode':<9}{'ms/frame':>10}{'max crossings':>15}{'at frame':>10}{'final':>8}"
+          f"{'rebuilds/frame':>16}{'ms/rebuild':>12}  note")
     for name in args.scenes:
         for mode in modes:
             r = measure(name, mode, args.frames, args.every, args.grid)
@@ -95,8 +113,13 @@ def run(args: argparse.Namespace) -> int:
             frame, most = r.worst
             final = str(r.samples[-1][1]) if r.samples else "-"
             note = f"blew up at frame {r.blew_up}" if r.blew_up is not None else ""
-            print(f"{name:<15}{mode:<9}{ms:>10}{most:>15}{frame:>10}{final:>8}  {note}".rstrip(), flush=True)
+            done = max(len(r.ms), 1)
+            per_frame = f"{r.rebuilds / done:.2f}" if mode == "contact" else "-"
+            per_rebuild = f"{r.search_ms / r.rebuilds:.2f}" if r.search_ms is not None and r.rebuilds else "-"
+            print(f"{name:<15}{mode:<9}{ms:>10}{most:>15}{frame:>10}{final:>8}{per_frame:>16}{per_rebuild:>12}"
+                  f"  {note}".rstrip(), flush=True)
     print(f"{args.grid}x{args.grid} points, {args.frames} frames; ms/frame = median over frames; crossings "
           f"(edges through triangles they share no point with) counted every {args.every} frames and after the "
-          "last; final = the last count before the end or a blow-up")
+          "last; final = the last count before the end or a blow-up; contact: whole rebuilds of its reference a "
+          "frame, and the ms of a rebuild's search (the twist's passes are not timed)")
     return 0

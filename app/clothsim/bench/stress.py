@@ -202,6 +202,12 @@ class StressRun:
             self._substep = substep
 
     @property
+    def through_the_api(self) -> bool:
+        """Whether the run is driven one substep at a time through the API (the twist), not by
+        whole frames of its scene."""
+        return self._substep is not None
+
+    @property
     def frames(self) -> int:
         """Frames advanced so far."""
         return self.sim.frame // self.steps if self._substep is not None else self.sim.frame
