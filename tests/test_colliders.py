@@ -70,7 +70,7 @@ def _capsule_distance(capsule, points: np.ndarray) -> np.ndarray:
      "sphere.motion.keyframes[1][0]: keyframe times must increase: 0.5 follows 1"),
     ({"plane": {"point": [0, 0, 0], "normal": [0, 1, 0], "friction": 0.5,
                 "motion": {"keyframes": [[0, [0, 0, 0]]], "velocity": [0, 1, 0]}}},
-     'plane.motion: expected exactly one of "keyframes" and "velocity"'),
+     'plane.motion: expected one of "keyframes" and "velocity", not both'),
     ({"capsule": {"a": [0, 0, 0], "b": [1, 0, 0], "radius": 0.1, "friction": 0.5,
                   "motion": {"velocity": [0, float("nan"), 0]}}}, "capsule.motion.velocity[1]:"),
     ({"box": [{"center": [0, 0, 0], "half_extents": [0.1, 0.1, 0.1], "friction": 0.5},

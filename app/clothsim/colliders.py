@@ -8,7 +8,7 @@ its group, packing, pose, reach test and collision). The order of :data:`KINDS` 
 which colliders are packed, collided, drawn and exported; the scene loader, the simulator, the
 sweeps' scene writer, the renderer, the exporters and the serve limits iterate :data:`KINDS`
 rather than naming the kinds. Every kind may carry a ``motion`` (:mod:`clothsim.motion`): a
-translation track of its ``anchor``, evaluated at the simulation's one clock
+translation track of its ``anchor`` and a turn about it, evaluated at the simulation's one clock
 (:mod:`clothsim.sim.clock`).
 """
 
@@ -20,7 +20,7 @@ from typing import Any, Callable, ClassVar
 
 from . import validate as V
 from .meshcollider import MESH, MESH_BYTES_PER_POINT
-from .motion import MOTION, MotionSpec
+from .motion import COLLIDER_MOTION, MotionSpec
 
 #: Bounds of every length a scene gives (the cloth's sides, a collider's sizes): far beyond any
 #: cloth, so that what the step derives from them stays a finite, non-zero float64.
@@ -83,7 +83,7 @@ class CapsuleSpec:
 class BoxSpec(Anchored):
     """An oriented box collider: ``center``, ``half_extents`` along its own axes and ``rotation``
     in degrees about x, y, z, applied as R = Rz . Ry . Rx (x first, right-handed). ``motion``
-    (optional) moves its center; the box does not turn."""
+    (optional) moves and turns it about its center."""
 
     ANCHOR: ClassVar[str] = "center"
     center: tuple[float, float, float]
@@ -118,14 +118,14 @@ SPHERE = V.record({
     "origin": V.required(V.vec3()),
     "radius": V.required(V.number(gt=0.0)),
     "friction": V.required(_FRICTION),
-    "motion": V.optional(MOTION),
+    "motion": V.optional(COLLIDER_MOTION),
 })
 
 PLANE = V.record({
     "point": V.required(V.vec3()),
     "normal": V.required(V.then(V.vec3(nonzero=True), _unit)),
     "friction": V.required(_FRICTION),
-    "motion": V.optional(MOTION),
+    "motion": V.optional(COLLIDER_MOTION),
 })
 
 CAPSULE = V.record({
@@ -133,7 +133,7 @@ CAPSULE = V.record({
     "b": V.required(V.vec3()),
     "radius": V.required(_SIZE),
     "friction": V.required(_FRICTION),
-    "motion": V.optional(MOTION),
+    "motion": V.optional(COLLIDER_MOTION),
 })
 
 BOX = V.record({
@@ -141,7 +141,7 @@ BOX = V.record({
     "half_extents": V.required(V.vec3(_SIZE)),
     "rotation": V.default(V.vec3(_ANGLE), (0.0, 0.0, 0.0)),
     "friction": V.required(_FRICTION),
-    "motion": V.optional(MOTION),
+    "motion": V.optional(COLLIDER_MOTION),
 })
 
 
@@ -156,8 +156,7 @@ def collider_json(spec: SphereSpec | PlaneSpec | CapsuleSpec | BoxSpec) -> dict[
 
 def motion_json(motion: MotionSpec) -> dict[str, Any]:
     """A ``motion`` object as scene-file JSON."""
-    return ({"velocity": list(motion.velocity)} if motion.velocity is not None
-            else {"keyframes": [[t, list(p)] for t, p in motion.keyframes]})
+    return motion.as_json()
 
 
 @dataclass(frozen=True)

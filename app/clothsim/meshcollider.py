@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from . import validate as V
-from .motion import MOTION, MotionSpec, Track
+from .motion import COLLIDER_MOTION, MotionSpec, Track
 from .objfile import ObjError, read_obj
 
 #: Largest scale and translation accepted: far beyond any scene, so that positions stay finite.
@@ -108,8 +108,7 @@ class MeshSpec:
                                "translate": list(self.translate), "rotation": list(self.rotation),
                                "friction": self.friction}
         if self.motion is not None:
-            out["motion"] = ({"velocity": list(self.motion.velocity)} if self.motion.velocity is not None else
-                             {"keyframes": [[t, list(p)] for t, p in self.motion.keyframes]})
+            out["motion"] = self.motion.as_json()
         return out
 
 
@@ -185,7 +184,7 @@ _FIELDS = V.record({
     "translate": V.default(V.vec3(V.number(ge=-MAX_EXTENT, le=MAX_EXTENT)), (0.0, 0.0, 0.0)),
     "rotation": V.default(V.vec3(), (0.0, 0.0, 0.0)),
     "friction": V.required(_FRICTION),
-    "motion": V.default(MOTION, None),
+    "motion": V.default(COLLIDER_MOTION, None),
 })
 
 

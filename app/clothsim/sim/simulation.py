@@ -379,7 +379,7 @@ class Simulation:
         motions = [spec.motion for spec in self.scene.colliders]
         for motion in [*motions, self.scene.cloth.pin_motion]:
             if motion is not None:
-                end = max(end, float("inf") if motion.velocity is not None else motion.keyframes[-1][0])
+                end = max(end, motion.ends)
         return end
 
     # ------------------------------------------------------------------------------------------
