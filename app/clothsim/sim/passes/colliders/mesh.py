@@ -1,8 +1,9 @@
 """Collisions with triangle meshes (:class:`~clothsim.sim.passes.colliders.meshgrid.MeshGroup`), one point at a time.
 
 Each substep a mesh has a translation before and after it (its motion track at the substep's two
-ends); a point is handled in the mesh's own frame, where its last position ``l`` and its position
-``q`` are taken relative to those two translations. Every triangle whose bounding box comes
+ends), and a turning mesh a turn Q at both ends too; a point is handled in the mesh's own frame,
+where its last position ``l`` and its position ``q`` are taken relative to those two poses
+(``Q0^T (last - p0)`` and ``Q1^T (pos - p1)``; the corrected point goes back by ``p1 + Q1 x``). Every triangle whose bounding box comes
 within ``r`` = thickness + |q - l| of ``q`` gives
 
 * the closest point on it to ``q`` (Ericson, Real-Time Collision Detection, 5.1.5), with the
@@ -84,7 +85,7 @@ from numba import njit, types
 from ....jit import BORROWED, CHUNKS, EXACT, KERNEL
 from ....jit.internals import call_native, native_address
 from ...clock import substep_time
-from .moving import Tracks, track_ends
+from .moving import Tracks, Turns, track_ends, turn_ends
 from .meshgrid import MeshGroup, mesh_group, DIMS_CELL0, DIMS_CLOSED, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
     INFO_HI, INFO_INV_H, INFO_LO, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK, PLANE_D
 from ...team import share
@@ -547,9 +548,10 @@ def point_contact(mesh: tuple, m: int, p: int, lx: float, ly: float, lz: float, 
 
 @njit(**BORROWED)
 def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple, m: int,
-                        before: np.ndarray, after: np.ndarray, brute: bool) -> None:
+                        before: np.ndarray, after: np.ndarray, turns: Turns | None, brute: bool) -> None:
     """Collide the points ``free`` with mesh ``m`` translated by ``before`` at the substep's start
-    and ``after`` at its end, in place."""
+    and ``after`` at its end (and turned by its Q at both, ``turns.motion[m]``, when ``turns`` is
+    not None: a scene where a mesh turns), in place."""
     keep = 1.0 - mesh.info[m, INFO_FRICTION]
     bx, by, bz = before[0], before[1], before[2]
     ax, ay, az = after[0], after[1], after[2]
@@ -567,6 +569,12 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
         p = free[k]
         lx, ly, lz = last[0, p] - bx, last[1, p] - by, last[2, p] - bz
         qx, qy, qz = pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az
+        if turns is not None:  # into the mesh's frame: Q0^T and Q1^T
+            u = turns.motion[m]
+            lx, ly, lz = (u[0] * lx + u[3] * ly + u[6] * lz, u[1] * lx + u[4] * ly + u[7] * lz,
+                          u[2] * lx + u[5] * ly + u[8] * lz)
+            qx, qy, qz = (u[9] * qx + u[12] * qy + u[15] * qz, u[10] * qx + u[13] * qy + u[16] * qz,
+                          u[11] * qx + u[14] * qy + u[17] * qz)
         # Most points have nothing within r: they lie beyond r of the mesh's box, or their list
         # is still valid and its nearest triangle, less how far the point is from the list's
         # reference point, is beyond r. Lengths bounded from above here by their sums of
@@ -585,9 +593,16 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
                     continue
         hit, ox, oy, oz = point_contact(mesh, m, p, lx, ly, lz, qx, qy, qz, brute)
         if hit:
-            pos[0, p] = ax + lx + (ox - lx) * keep
-            pos[1, p] = ay + ly + (oy - ly) * keep
-            pos[2, p] = az + lz + (oz - lz) * keep
+            if turns is None:
+                pos[0, p] = ax + lx + (ox - lx) * keep
+                pos[1, p] = ay + ly + (oy - ly) * keep
+                pos[2, p] = az + lz + (oz - lz) * keep
+            else:  # back from the mesh's frame at the substep's end: p1 + Q1 x
+                u = turns.motion[m]
+                x, y, z = lx + (ox - lx) * keep, ly + (oy - ly) * keep, lz + (oz - lz) * keep
+                pos[0, p] = ax + u[9] * x + u[10] * y + u[11] * z
+                pos[1, p] = ay + u[12] * x + u[13] * y + u[14] * z
+                pos[2, p] = az + u[15] * x + u[16] * y + u[17] * z
 
 
 @njit(**BORROWED)
@@ -600,7 +615,7 @@ def collide_meshes_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, me
     part = free[f0:f1]
     for m in range(mesh.dims.shape[0]):
         if on[m]:
-            collide_mesh_points(pos, last, part, mesh, m, mesh.pose[m, :3], mesh.pose[m, 3:], False)
+            collide_mesh_points(pos, last, part, mesh, m, mesh.pose[m, :3], mesh.pose[m, 3:], mesh.turns, False)
 
 
 @njit(**EXACT)
@@ -612,7 +627,7 @@ def mesh_targets(pos: np.ndarray, last: np.ndarray, mesh: tuple, brute: bool) ->
     free = np.arange(pos.shape[1])
     for m in range(mesh.dims.shape[0]):
         shift = mesh.pose[m, :3]
-        collide_mesh_points(out, last, free, mesh, m, shift, shift, brute)
+        collide_mesh_points(out, last, free, mesh, m, shift, shift, None, brute)
     return out
 
 
@@ -627,10 +642,11 @@ def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> MeshGroup:
 
 
 @njit(**KERNEL)
-def pose_meshes(tr: Tracks | None, pose: np.ndarray, substep: int) -> None:
+def pose_meshes(tr: Tracks | None, tu: Turns | None, pose: np.ndarray, substep: int) -> None:
     """Each moving mesh's translation at the start and end of substep ``substep`` of the call into
-    its row of ``pose`` (nothing when none moves: ``tr`` is None). Times count from the clock's
-    base (see :mod:`clothsim.sim.clock`)."""
+    its row of ``pose`` (nothing when none moves: ``tr`` is None), and with ``tu`` (a mesh turns) its
+    turn Q at both into its row of ``tu.motion``. Times count from the clock's base (see
+    :mod:`clothsim.sim.clock`)."""
     if tr is None:
         return
     s0 = substep_time(tr.clock, substep, tr.dt)
@@ -641,30 +657,62 @@ def pose_meshes(tr: Tracks | None, pose: np.ndarray, substep: int) -> None:
         for c in range(3):
             pose[r, c] = tr.scratch[0, c]
             pose[r, 3 + c] = tr.scratch[1, c]
+        if tu is not None:
+            turn_ends(tu, m, s0, s1)
+            for i in range(3):
+                for j in range(3):
+                    tu.motion[r, 3 * i + j] = tu.q[0, i, j]
+                    tu.motion[r, 9 + 3 * i + j] = tu.q[1, i, j]
 
 
 @njit(**KERNEL)
 def pose(g: MeshGroup, substep: int) -> None:
     """Put the moving meshes at their pose for substep ``substep``."""
-    pose_meshes(g.tracks, g.pose, substep)
+    pose_meshes(g.tracks, g.turns, g.pose, substep)
 
 
 @njit(**EXACT)
 def reach(g: MeshGroup, box: np.ndarray, on: np.ndarray, offset: float) -> int:
     """Mark the meshes the cloth's bounding box (current and last positions) may touch during
     this substep (at their poses); returns how many were ruled out. A mesh's box, over both
-    translations of the substep and widened by the thickness, that misses the cloth's box can
-    neither be crossed nor come within the thickness of a point, so skipping it is exact."""
+    translations of the substep (and both turns, for a turning mesh) and widened by the thickness,
+    that misses the cloth's box can neither be crossed nor come within the thickness of a point, so
+    skipping it is exact."""
+    return reach_meshes(g.info, g.pose, g.thickness, g.turns, box, on)
+
+
+@njit(**EXACT)
+def reach_meshes(info: np.ndarray, poses: np.ndarray, thickness: float, turns: Turns | None, box: np.ndarray,
+                 on: np.ndarray) -> int:
+    """:func:`reach` over the meshes' boxes ``info`` and ``poses`` (and ``turns`` where a mesh turns:
+    a local box turned by Q is held by the world-axis box of half size |Q| h about Q c)."""
     skipped = 0
-    for m in range(g.dims.shape[0]):
-        before = g.pose[m, :3]
-        after = g.pose[m, 3:]
+    for m in range(poses.shape[0]):
+        before = poses[m, :3]
+        after = poses[m, 3:]
         hit = True
-        for c in range(3):
-            lo = g.info[m, INFO_LO + c] + min(before[c], after[c]) - g.thickness
-            hi = g.info[m, INFO_HI + c] + max(before[c], after[c]) + g.thickness
-            if hi < box[c] or lo > box[3 + c]:
-                hit = False
+        if turns is None:
+            for c in range(3):
+                lo = info[m, INFO_LO + c] + min(before[c], after[c]) - thickness
+                hi = info[m, INFO_HI + c] + max(before[c], after[c]) + thickness
+                if hi < box[c] or lo > box[3 + c]:
+                    hit = False
+        else:
+            u = turns.motion[m]
+            for c in range(3):
+                lo = np.inf
+                hi = -np.inf
+                for end in range(2):
+                    centre = before[c] if end == 0 else after[c]
+                    extent = 0.0
+                    for k in range(3):
+                        q = u[9 * end + 3 * c + k]
+                        centre += q * 0.5 * (info[m, INFO_LO + k] + info[m, INFO_HI + k])
+                        extent += abs(q) * 0.5 * (info[m, INFO_HI + k] - info[m, INFO_LO + k])
+                    lo = min(lo, centre - extent)
+                    hi = max(hi, centre + extent)
+                if hi + thickness < box[c] or lo - thickness > box[3 + c]:
+                    hit = False
         on[m] = hit
         skipped += 0 if hit else 1
     return skipped
@@ -677,7 +725,7 @@ def _untracked(g: MeshGroup) -> MeshGroup:
     return MeshGroup(g.verts, g.tris, g.tbox, g.fnorm, g.enorm, g.vnorm, g.info, g.dims, g.cell_start, g.cell_tris,
                      g.cell_box, g.near_at, g.near_n, g.near_tris, g.near_d, g.near_ref, g.near_first,
                      g.near_pl, g.pose,
-                     g.thickness, g.on, None, g.collide)
+                     g.thickness, g.on, None, g.turns, g.collide)
 
 
 @njit(**EXACT)

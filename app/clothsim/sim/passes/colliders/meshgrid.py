@@ -5,8 +5,9 @@ vertices (the translation, which may move, is applied to the cloth's points inst
 the pseudo-normals that tell inside from outside (face normals, edge normals = the normalised sum
 of the two faces' normals, and angle-weighted vertex normals: Baerentzen and Aanaes, "Signed
 distance computation using the angle weighted pseudonormal", IEEE TVCG 2005), its pose (the
-translation at the substep's start and end: put there each substep for a moving mesh by
-:func:`clothsim.sim.passes.colliders.mesh.pose` from its :class:`~.moving.Tracks`), and a
+translation at the substep's start and end, and for a turning mesh its turn Q at both: put there
+each substep for a moving mesh by :func:`clothsim.sim.passes.colliders.mesh.pose` from its
+:class:`~.moving.Tracks` and :class:`~.moving.Turns`), and a
 uniform grid of its triangles.
 
 The grid: cubic cells of edge ``h`` over the mesh's bounding box; a triangle is listed in every
@@ -33,7 +34,7 @@ import numpy as np
 from ....meshcollider import NEAR_D_WIDTH, NEAR_PLANES, NEAR_ROOM, PLANE_WIDTH
 from ....scene import Scene
 from ...clock import track_at
-from .moving import Tracks, pack_tracks
+from .moving import Tracks, Turns, pack_tracks, pack_turns
 
 #: Columns of ``MeshGroup.info`` (float64) and ``MeshGroup.dims`` (int64), one row per mesh.
 INFO_LO, INFO_HI, INFO_INV_H, INFO_FRICTION, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK = 0, 3, 6, 7, 8, 9, 10
@@ -78,6 +79,7 @@ class MeshGroup(NamedTuple):
     thickness: float
     on: np.ndarray  # (M,) bool: the reach flags
     tracks: Tracks | None  # the moving meshes' translations (None when none moves)
+    turns: Turns | None  # their turns, motion (M, 18): Q at the substep's start and end (None when none turns)
     #: address of the mesh pass compiled for this group (see :func:`clothsim.sim.solvers.frame.kernel_addresses`); 0 until known
     collide: int = 0
 
@@ -217,7 +219,8 @@ def mesh_group(scene: Scene, clock: np.ndarray | None = None, dt: float = 0.0) -
                      np.zeros((len(scene.meshes), n_points, NEAR_PLANES, PLANE_WIDTH)),
                      pose, float(thickness),
                      np.zeros(len(scene.meshes), dtype=np.bool_),
-                     None if clock is None else pack_tracks(scene.meshes, clock, dt))
+                     None if clock is None else pack_tracks(scene.meshes, clock, dt),
+                     None if clock is None else pack_turns(scene.meshes, width=18))
 
 
 def cells_per_mesh(group: MeshGroup) -> list[int]:

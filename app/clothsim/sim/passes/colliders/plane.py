@@ -6,7 +6,9 @@ from, moving from its last position towards there by (1 - friction). A point who
 lies exactly on the plane counts as being on the normal's side, so a cloth row that starts on the
 floor does not fall through it. In a scene where any collider moves, the test is made in the
 plane's moving frame (the last position carried along by the plane's displacement): exact at any
-speed of the plane.
+speed of the plane. A turning plane (a turn about its point turns its normal) carries the last
+position by its motion over the substep instead (:func:`~.moving.carried`): the same test, relative
+to the turning plane.
 """
 
 from __future__ import annotations
@@ -16,9 +18,10 @@ import numpy as np
 from numba import njit
 
 from ....jit import KERNEL
+from .moving import carried, carried_box
 from .rows import collide, packer, pose, reach, row_group
 
-__all__ = ["ALWAYS", "CARRY_AT", "Group", "POINTS", "Planes", "SURFACE_OFFSET", "collide", "collide_rows", "pack",
+__all__ = ["ALWAYS", "CARRY_AT", "Group", "POINTS", "Planes", "SURFACE_OFFSET", "TURNS", "collide", "collide_rows", "pack",
            "pose", "reach", "reach_rows"]
 
 #: The spec's SURFACE_OFFSET: how far above a plane (or outside a box) a corrected point is put.
@@ -32,12 +35,15 @@ Group = Planes = row_group("Planes", __name__, "The scene's planes (see clothsim
 ALWAYS = True
 #: A pose moves a plane's point; its carry is the group's own array (see :mod:`.rows`).
 POINTS, CARRY_AT = 1, 0
-pack = packer(Planes, "planes", lambda p: (*p.point, *p.normal, p.friction), 7, lambda p: p.point)
+#: A turn turns a plane's normal.
+TURNS = ((3, 4, 5),)
+pack = packer(Planes, "planes", lambda p: (*p.point, *p.normal, p.friction), 7, lambda p: p.point, TURNS,
+              lambda p: p.normal)
 
 
 @njit(**KERNEL)
 def collide_rows(pos: np.ndarray, last: np.ndarray, free: np.ndarray, planes: np.ndarray, on: np.ndarray,
-                 carry: np.ndarray | None, offset: float) -> None:
+                 carry: np.ndarray | None, turn: np.ndarray | None, offset: float) -> None:
     """Bounce back points that crossed a reachable plane during the last step (see the module's
     notes); with ``carry`` (a scene where something moves), in each plane's moving frame: a
     point crossed a plane when its distance from it changed sign between its carried last
@@ -57,7 +63,9 @@ def collide_rows(pos: np.ndarray, last: np.ndarray, free: np.ndarray, planes: np
             lx = last[0, p]
             ly = last[1, p]
             lz = last[2, p]
-            if carry is not None:
+            if turn is not None:
+                lx, ly, lz = carried(turn[o], lx, ly, lz)
+            elif carry is not None:
                 lx = lx + carry[o, 0]
                 ly = ly + carry[o, 1]
                 lz = lz + carry[o, 2]
@@ -73,18 +81,24 @@ def collide_rows(pos: np.ndarray, last: np.ndarray, free: np.ndarray, planes: np
 
 
 @njit(**KERNEL)
-def reach_rows(box: np.ndarray, planes: np.ndarray, on: np.ndarray, carry: np.ndarray | None, offset: float) -> int:
+def reach_rows(box: np.ndarray, planes: np.ndarray, on: np.ndarray, carry: np.ndarray | None,
+               turn: np.ndarray | None, offset: float) -> int:
     """Mark the planes the cloth's box (of current and last positions; stretched by each plane's
     carry where something moves) is not wholly on one side of; returns how many were ruled out."""
     skipped = 0
     for o in range(planes.shape[0]):
         lo = 0.0
         hi = 0.0
+        if turn is not None:
+            cb = carried_box(box, turn[o])
         for c in range(3):
             n = planes[o, 3 + c]
             near = box[c]
             far = box[3 + c]
-            if carry is not None:
+            if turn is not None:
+                near = cb[c]
+                far = cb[3 + c]
+            elif carry is not None:
                 near = near + min(carry[o, c], 0.0)
                 far = far + max(carry[o, c], 0.0)
             a = (near - planes[o, c]) * n

@@ -10,13 +10,18 @@ defines only what is its own:
 * ``pack``, made by :func:`packer` from how a spec becomes a row;
 * ``POINTS`` and ``CARRY_AT``: how many points (xyz column triples) a pose moves at the start of a
   row, and the column of the carry (in the group's carries, or in its rows);
-* ``reach_rows(box, rows, on, [carry,] offset) -> int``: marks which colliders the cloth's box
+* ``TURNS``: the direction columns (xyz column triples) a turn turns (a plane's normal, a box's
+  axes), and ``turned(spec)``: those directions at the scene pose (the points a turn moves are the
+  ``POINTS`` a pose moves);
+* ``reach_rows(box, rows, on, [carry,] turn, offset) -> int``: marks which colliders the cloth's box
   may touch in ``on``, returns how many it ruled out;
-* ``collide_rows(pos, last, part, rows, on, [carry,] offset)``: the points ``part`` against the
+* ``collide_rows(pos, last, part, rows, on, [carry,] turn, offset)``: the points ``part`` against the
   reachable colliders;
 
 and imports ``pose``, ``reach`` and ``collide`` from here (``carry`` is passed to a kind of
-:class:`CarriedRows` only).
+:class:`CarriedRows` only; ``turn`` is the rows' motions over the substep, :attr:`~.moving.Turns.motion`,
+where a collider of the kind turns, and None otherwise, so that the tests of a kind none of whose
+colliders turns are pruned back to what they were before turns).
 """
 
 from __future__ import annotations
@@ -26,11 +31,12 @@ from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
+from numba import types
 from numba.extending import overload
 
 from ....jit import KERNEL
 from ...team import chunk_of
-from .moving import Tracks, pack_tracks, pose_rows
+from .moving import Tracks, Turns, pack_tracks, pack_turns, pose_rows, turn_rows
 
 
 class Rows(NamedTuple):
@@ -41,6 +47,7 @@ class Rows(NamedTuple):
     rows: np.ndarray
     on: np.ndarray
     tracks: Tracks | None
+    turns: Turns | None
 
 
 class CarriedRows(NamedTuple):
@@ -51,6 +58,7 @@ class CarriedRows(NamedTuple):
     on: np.ndarray
     carry: np.ndarray | None
     tracks: Tracks | None
+    turns: Turns | None
 
 
 def row_group(name: str, module: str, doc: str, carried: bool = False) -> type:
@@ -61,20 +69,24 @@ def row_group(name: str, module: str, doc: str, carried: bool = False) -> type:
 
 
 def packer(group: type, attr: str, row: Callable[[Any], tuple], width: int,
-           anchor: Callable[[Any], tuple]) -> Callable[[Any, np.ndarray, float, bool], Any]:
+           anchor: Callable[[Any], tuple], turns: tuple = (),
+           turned: Callable[[Any], tuple] | None = None) -> Callable[[Any, np.ndarray, float, bool], Any]:
     """A kind's ``pack(scene, clock, dt, swept)``: the ``group`` of the specs ``scene.<attr>``,
     each spec's row given by ``row`` (``width`` columns), its reach flags, its carries (for a
     ``carried`` group in a scene where something moves) and the tracks of the moving ones
-    (``anchor(spec)``: the point columns a pose translates). An empty group for no specs."""
+    (``anchor(spec)``: the point columns a pose translates) and their turns (``turns``: the
+    direction columns a turn turns, ``turned(spec)`` those directions at the scene pose). An empty
+    group for no specs."""
 
     def pack(scene: Any, clock: np.ndarray, dt: float, swept: bool) -> Any:
         specs = getattr(scene, attr)
         rows = np.array([row(spec) for spec in specs], dtype=np.float64).reshape(-1, width)
         on = np.zeros(len(rows), dtype=np.bool_)
         tracks = pack_tracks(specs, clock, dt, anchor)
+        spins = pack_turns(specs, turns, turned)
         if issubclass(group, CarriedRows):
-            return group(rows, on, np.zeros((len(rows), 3)) if swept else None, tracks)
-        return group(rows, on, tracks)
+            return group(rows, on, np.zeros((len(rows), 3)) if swept else None, tracks, spins)
+        return group(rows, on, tracks, spins)
 
     pack.__doc__ = f"The group of the scene's {attr} (see :func:`clothsim.sim.passes.colliders.rows.packer`)."
     return pack
@@ -105,13 +117,34 @@ def _kind(group: Any) -> tuple[Any, bool]:
     return sys.modules[cls.__module__], issubclass(cls, CarriedRows)
 
 
+def _turns(group: Any) -> bool:
+    """Whether a group's type holds turns (a collider of the kind turns)."""
+    return not isinstance(group.types[group.fields.index("turns")], types.NoneType)
+
+
 @overload(pose, jit_options=KERNEL)
 def _pose(g, substep):  # noqa: ANN001, ANN202
     kind, carried = _kind(g)
     points, at = kind.POINTS, kind.CARRY_AT
+    if _turns(g):
+        if carried:
+            return lambda g, substep: turn_rows(g.tracks, g.turns, g.rows, points, g.carry, at, substep)
+        return lambda g, substep: turn_rows(g.tracks, g.turns, g.rows, points, g.rows, at, substep)
     if carried:
         return lambda g, substep: pose_rows(g.tracks, g.rows, points, g.carry, at, substep)
     return lambda g, substep: pose_rows(g.tracks, g.rows, points, g.rows, at, substep)
+
+
+def _motion(g):  # noqa: ANN001, ANN202
+    """The rows' motions of a group with turns, None for one without (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_motion, jit_options=KERNEL)
+def _motion_impl(g):  # noqa: ANN001, ANN202
+    if _turns(g):
+        return lambda g: g.turns.motion
+    return lambda g: None
 
 
 # (the carry goes to the kind's functions as an argument of its own: Numba prunes a branch on an
@@ -122,8 +155,8 @@ def _reach(g, box, on, offset):  # noqa: ANN001, ANN202
     kind, carried = _kind(g)
     test = kind.reach_rows
     if carried:
-        return lambda g, box, on, offset: test(box, g.rows, on, g.carry, offset)
-    return lambda g, box, on, offset: test(box, g.rows, on, offset)
+        return lambda g, box, on, offset: test(box, g.rows, on, g.carry, _motion(g), offset)
+    return lambda g, box, on, offset: test(box, g.rows, on, _motion(g), offset)
 
 
 @overload(collide, jit_options=KERNEL)
@@ -132,5 +165,6 @@ def _collide(g, pos, last, free, c, on, offset):  # noqa: ANN001, ANN202
     push = kind.collide_rows
     if carried:
         return lambda g, pos, last, free, c, on, offset: push(pos, last, chunk_of(free, c), g.rows, on, g.carry,
-                                                               offset)
-    return lambda g, pos, last, free, c, on, offset: push(pos, last, chunk_of(free, c), g.rows, on, offset)
+                                                               _motion(g), offset)
+    return lambda g, pos, last, free, c, on, offset: push(pos, last, chunk_of(free, c), g.rows, on, _motion(g),
+                                                           offset)

@@ -27,6 +27,7 @@ import numpy as np
 from numba import njit
 
 from ....jit import KERNEL
+from .moving import carried, carried_box
 
 #: Most samples taken along one point's relative path in one substep (a bound for blown-up states).
 MAX_SAMPLES = 64
@@ -94,6 +95,41 @@ def push_out(pos: np.ndarray, last: np.ndarray, free: np.ndarray, row: np.ndarra
                 pos[1, p] = ly + (ty - ly) * keep
                 pos[2, p] = lz + (tz - lz) * keep
                 break
+
+
+@njit(inline="always", **KERNEL)
+def push_out_turning(pos: np.ndarray, last: np.ndarray, free: np.ndarray, row: np.ndarray, keep: float, step: float,
+                     mo: np.ndarray, surface: Any, offset: float) -> None:
+    """:func:`push_out` for a collider that may turn: each point's last position carried by the
+    collider's motion over the substep ``mo`` (a row of :attr:`~.moving.Turns.motion`), so that the
+    relative path, and the friction along it, are relative to the turning surface."""
+    for k in range(free.shape[0]):
+        p = free[k]
+        lx, ly, lz = carried(mo, last[0, p], last[1, p], last[2, p])
+        x = pos[0, p]
+        y = pos[1, p]
+        z = pos[2, p]
+        n = samples(x - lx, y - ly, z - lz, step)
+        for j in range(1, n + 1):
+            if j < n:
+                s = j / n
+                hit, tx, ty, tz = surface(lx + (x - lx) * s, ly + (y - ly) * s, lz + (z - lz) * s, row, offset)
+            else:
+                hit, tx, ty, tz = surface(x, y, z, row, offset)
+            if hit:
+                pos[0, p] = lx + (tx - lx) * keep
+                pos[1, p] = ly + (ty - ly) * keep
+                pos[2, p] = lz + (tz - lz) * keep
+                break
+
+
+@njit(**KERNEL)
+def overlaps_turning(box: np.ndarray, mo: np.ndarray, lo_x: float, lo_y: float, lo_z: float, hi_x: float,
+                     hi_y: float, hi_z: float) -> bool:
+    """:func:`overlaps` for a collider that may turn: the cloth's box with its image under the
+    collider's motion ``mo`` (:func:`~.moving.carried_box`) meets the box [lo, hi]."""
+    b0, b1, b2, b3, b4, b5 = carried_box(box, mo)
+    return not (hi_x < b0 or lo_x > b3 or hi_y < b1 or lo_y > b4 or hi_z < b2 or lo_z > b5)
 
 
 @njit(**KERNEL)
