@@ -23,7 +23,7 @@ import numpy as np
 from ..render import mesh as render_mesh
 from ..colliders import KINDS
 from ..scene import Scene
-from ..sim.passes.colliders.moving import shift
+from ..sim.passes.colliders.moving import placement, shift
 
 #: Rings and segments of a sphere written as polygons (the renderer's default resolution).
 SPHERE_RESOLUTION = (40, 40)
@@ -58,6 +58,15 @@ class Collider:
     def offset(self, t: float) -> np.ndarray:
         """How far the collider has moved from the record's pose at time ``t`` (s), (3,)."""
         return np.zeros(3) if self.moving is None else shift(self.moving, t)
+
+    @property
+    def turns(self) -> bool:
+        """Whether the collider's motion turns it (then :meth:`placement`, not :meth:`offset`)."""
+        return self.moving is not None and self.moving.motion.turns
+
+    def placement(self, t: float) -> np.ndarray:
+        """(4, 4) the map from the record's pose to the collider's pose at time ``t`` (s)."""
+        return np.eye(4) if self.moving is None else placement(self.moving, t)
 
 
 # -- cloth ---------------------------------------------------------------------------------------

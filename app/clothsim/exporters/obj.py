@@ -72,8 +72,14 @@ class ObjSequenceWriter:
                  "o cloth\n", _rows("v", points), self._uv_text, _rows("vn", normals), self._face_text]
         offset = len(points)
         for collider in self._moving:
-            moved = (collider.mesh.points + collider.offset(seconds)).astype(np.float32)
-            parts.append(_mesh_text(collider.name, replace(collider.mesh, points=moved), offset))
+            if collider.turns:
+                place = collider.placement(seconds)
+                moved = (collider.mesh.points.astype(np.float64) @ place[:3, :3].T + place[:3, 3]).astype(np.float32)
+                turned = (collider.mesh.normals.astype(np.float64) @ place[:3, :3].T).astype(np.float32)
+                parts.append(_mesh_text(collider.name, replace(collider.mesh, points=moved, normals=turned), offset))
+            else:
+                moved = (collider.mesh.points + collider.offset(seconds)).astype(np.float32)
+                parts.append(_mesh_text(collider.name, replace(collider.mesh, points=moved), offset))
             offset += len(moved)
         (self.folder / cloth_name(frame)).write_text("".join(parts), encoding="ascii", newline="\n")
 

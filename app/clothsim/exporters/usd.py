@@ -97,7 +97,9 @@ class UsdStageWriter:
         mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         mesh.CreateExtentAttr(self._extent(mesh_data.points))
         if collider.moving is not None:
-            self._moving.append((collider, mesh.AddTranslateOp(), np.zeros(3)))
+            # a turning collider: a matrix op of its placement (x -> p + Q (x - anchor))
+            self._moving.append((collider, mesh.AddTransformOp() if collider.turns else mesh.AddTranslateOp(),
+                                 np.zeros(3)))
 
     def _vec3f(self, values: np.ndarray) -> Any:
         return self.Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(values, dtype=np.float32))
@@ -114,7 +116,11 @@ class UsdStageWriter:
         self.cloth.GetNormalsAttr().Set(self._vec3f(normals), time)
         self.cloth.GetExtentAttr().Set(self._extent(points), time)
         for collider, op, base in self._moving:
-            op.Set(self.Gf.Vec3d(*(float(c) for c in base + collider.offset(seconds))), time)
+            if collider.turns and collider.sphere is None:
+                # USD's matrices act on row vectors: the transpose of the placement
+                op.Set(self.Gf.Matrix4d(*(float(c) for c in collider.placement(seconds).T.ravel())), time)
+            else:
+                op.Set(self.Gf.Vec3d(*(float(c) for c in base + collider.offset(seconds))), time)
 
     def finish(self, start: int, end: int, fps: float) -> None:
         """Set the time range and rate, and write the stage to the path given at construction."""

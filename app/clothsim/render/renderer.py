@@ -19,7 +19,7 @@ from ..cloth import Springs
 from ..errors import ClothsimError
 from ..colliders import KINDS
 from ..scene import Scene, available_memory
-from ..sim.passes.colliders.moving import posed, shift
+from ..sim.passes.colliders.moving import placement
 from . import mesh, textures
 from .camera import FLIP_Y, Camera, default_position, default_target
 from .context import create_context
@@ -384,13 +384,14 @@ class Renderer:
             self._planes[key] = (self.ctx.buffer(verts), self.ctx.buffer(idx), _indices(idx))
         return self._planes[key]
 
-    def _draw_shape(self, prog: Any, look: str, key: tuple[Any, ...], build: Any, offset: np.ndarray) -> None:
-        """Draw a collider mesh made once by ``build()`` (world space at its scene pose), moved by ``offset``."""
+    def _draw_shape(self, prog: Any, look: str, key: tuple[Any, ...], build: Any, model: np.ndarray) -> None:
+        """Draw a collider mesh made once by ``build()`` (world space at its scene pose), placed by
+        ``model`` (its motion's map from the scene pose, :func:`~clothsim.sim.passes.colliders.moving.placement`)."""
         if key not in self._shapes:
             verts, idx = build()
             self._shapes[key] = (self.ctx.buffer(verts), self.ctx.buffer(idx), _indices(idx))
         vbo, ibo, idx = self._shapes[key]
-        set_matrix(prog, "u_model", _translation(offset))
+        set_matrix(prog, "u_model", model)
         self._draw_indexed(prog, look, "shape", key, [(vbo, SHAPE_LAYOUT, *SHAPE_ATTRIBUTES)], ibo, idx)
 
     def _drop_vaos(self, geometry: str) -> None:
@@ -574,8 +575,9 @@ class Renderer:
             return False
         now = float(getattr(sim, "time", 0.0))
         for plane in scene.planes:
-            normal = np.asarray(plane.normal, dtype=np.float64)
-            base = float(normal @ (np.asarray(plane.point, dtype=np.float64) + shift(plane, now)))
+            place = placement(plane, now)
+            normal = place[:3, :3] @ np.asarray(plane.normal, dtype=np.float64)
+            base = float(normal @ (place[:3, :3] @ np.asarray(plane.point, dtype=np.float64) + place[:3, 3]))
             side = float(normal @ cam.position) - base
             heights = (buffers.vertices[:, :3].astype(np.float64) @ normal - base) * np.sign(side)
             if not heights.min() > PLANE_MARGIN * float(np.linalg.norm(normal)):
@@ -638,7 +640,8 @@ class Renderer:
         self._solid(look, True, False)
         vbo, ibo, idx = self._sphere(settings.sphere_resolution)
         model = np.diag([*(3 * [sphere.radius * SPHERE_DRAW_SCALE]), 1.0])
-        model[:3, 3] = posed(sphere, now).origin
+        model[:3, 3] = sphere.origin
+        model = placement(sphere, now) @ model
         set_matrix(prog, "u_model", model)
         self._draw_indexed(prog, look, "sphere", settings.sphere_resolution,
                            [(vbo, SHAPE_LAYOUT, *SHAPE_ATTRIBUTES)], ibo, idx)
@@ -648,12 +651,12 @@ class Renderer:
         # drawn thinner for the reason spheres are (see SPHERE_DRAW_SCALE)
         key = ("capsule", capsule.a, capsule.b, capsule.radius, settings.sphere_resolution)
         self._draw_shape(prog, look, key, lambda c=capsule: mesh.capsule_mesh(
-            c.a, c.b, c.radius * SPHERE_DRAW_SCALE, *settings.sphere_resolution), shift(capsule, now))
+            c.a, c.b, c.radius * SPHERE_DRAW_SCALE, *settings.sphere_resolution), placement(capsule, now))
 
     def _draw_plane(self, prog: Any, look: str, settings: RenderSettings, plane: Any, now: float) -> None:
         self._solid(look, False, True)
         vbo, ibo, idx = self._plane(plane.point, plane.normal)
-        set_matrix(prog, "u_model", _translation(shift(plane, now)))
+        set_matrix(prog, "u_model", placement(plane, now))
         self._draw_indexed(prog, look, "plane", (plane.point, plane.normal),
                            [(vbo, SHAPE_LAYOUT, *SHAPE_ATTRIBUTES)], ibo, idx)
 
@@ -661,7 +664,7 @@ class Renderer:
         self._solid(look, True, True)
         key = ("box", box.center, box.half_extents, box.rotation)
         self._draw_shape(prog, look, key, lambda b=box: mesh.box_mesh(b.center, b.half_extents, b.matrix()),
-                         shift(box, now))
+                         placement(box, now))
 
     def _draw_mesh(self, prog: Any, look: str, settings: RenderSettings, spec: Any, now: float) -> None:
         """A triangle mesh at its place at the simulation's time (culled from behind when closed,
@@ -669,8 +672,8 @@ class Renderer:
         self._solid(look, spec.closed, False)
         vbo, ibo, idx = self._mesh_collider(spec)
         model = np.eye(4)
-        model[:3, 3] = spec.track().at(now)
-        set_matrix(prog, "u_model", model)
+        model[:3, 3] = spec.translate
+        set_matrix(prog, "u_model", placement(spec, now) @ model)
         self._draw_indexed(prog, look, "mesh", id(spec), [(vbo, SHAPE_LAYOUT, *SHAPE_ATTRIBUTES)], ibo, idx)
 
     def _draw_wireframe(self, prog: Any, sim: ClothState, settings: RenderSettings,
@@ -742,9 +745,3 @@ class Renderer:
 def _indices(idx: Any) -> np.ndarray:
     """A shape's triangle indices as the flat uint32 array its index buffer holds."""
     return np.ascontiguousarray(np.asarray(idx, dtype=np.uint32).ravel())
-
-
-def _translation(offset: np.ndarray) -> np.ndarray:
-    m = np.eye(4)
-    m[:3, 3] = offset
-    return m
