@@ -44,10 +44,33 @@ def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet"
     return scene_from_dict(data, "<compile>")
 
 
+def _turning_scene():
+    """A tiny scene whose colliders of every kind turn: the turning groups' kernels (a plan that
+    holds them is compiled from these, whichever other kinds it has)."""
+    from ..colliders import KINDS
+    from ..resources import data_dir
+    from ..scene import scene_from_dict
+
+    turn = {"angular_velocity": [0, 90, 0]}
+    shapes = {"sphere": {"origin": [0.5, 0.5, 0.5], "radius": 0.2, "friction": 0.3, "motion": turn},
+              "plane": {"point": [0, 0, 0], "normal": [0, 1, 0], "friction": 0.5, "motion": turn},
+              "capsule": {"a": [0, 0.3, 0], "b": [1, 0.3, 0], "radius": 0.1, "friction": 0.3, "motion": turn},
+              "box": {"center": [0.5, 0.2, 0.5], "half_extents": [0.2, 0.1, 0.2], "friction": 0.3, "motion": turn},
+              "mesh": {"path": str(data_dir("scenes") / "torus.obj"), "translate": [0.5, 0.5, 0.5], "friction": 0.3,
+                       "motion": turn}}
+    assert set(shapes) == {kind.key for kind in KINDS}
+    data: dict[str, Any] = {
+        "cloth": {"width": 1, "height": 1, "num_width_points": 6, "num_height_points": 6, "thickness": 0.01,
+                  "orientation": 0, "damping": 0.2, "density": 150, "ks": 5000},
+        "simulation": {"self_collision": False, "simulation_steps": 2}, **shapes}
+    return scene_from_dict(data, "<compile>")
+
+
 def work_items() -> list[tuple[str, Callable[[], None]]]:
     """Everything ``clothsim compile`` compiles: each frame-kernel plan (self-collision mode x
     colliders; wind and moving pins with the spec's self-collision, as the bundled ``flag`` uses),
-    the plans of the bundled capsule, box, moving-collider and mesh scenes, the contact mode's plan
+    the plans of the bundled capsule, box, moving-collider and mesh scenes, colliders of every kind
+    turning, the contact mode's plan
     with colliders, each other integrator, the rest detector and the renderer's mesh kernel."""
     from ..sim import Simulation
 
@@ -65,6 +88,7 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
     # moving or not, is a plan of its own: these are the ones shipped)
     items += [(f"frame kernel: bundled scene {name}", step(load_scene(name))) for name in ("tablecloth", "curtain",
                                                                                           "capsule")]
+    items.append(("colliders of every kind turning", step(_turning_scene())))
     items += [(f"frame kernel: self-collision {mode}, {'colliders' if col else 'no colliders'}",
                step(_tiny_scene(mode, col))) for mode in ("spec", "off", "grid") for col in (True, False)]
     items += [("frame kernel: self-collision spec, wind", step(_tiny_scene("spec", False, wind=True))),
