@@ -24,6 +24,7 @@ p(t) the translation's position and Q(t) = Rot(w t) . E(angles(t)) . R_static^T
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -167,29 +168,39 @@ def position_at(times: np.ndarray, points: np.ndarray, velocity: np.ndarray, t: 
 # Validation
 
 
-def _keyframe(value: Any, at: V.At) -> tuple[float, tuple[float, float, float]]:
-    items = V.items_of(value)
-    if items is None or len(items) != 2:
-        raise at.fail(f"expected a keyframe [time, [x, y, z]], got {V.shown(value)}")
-    return V.number(ge=0.0)(items[0], at.index(0)), _OFFSET(items[1], at.index(1))
+def _keyframe_rule(vector: Callable[[Any, V.At], tuple[float, float, float]], what: str) -> Callable:
+    # a keyframe [time, vector]: a position ([x, y, z]) or an orientation ([rx, ry, rz])
+    def rule(value: Any, at: V.At) -> tuple[float, tuple[float, float, float]]:
+        items = V.items_of(value)
+        if items is None or len(items) != 2:
+            raise at.fail(f"expected a keyframe [time, {what}], got {V.shown(value)}")
+        return V.number(ge=0.0)(items[0], at.index(0)), vector(items[1], at.index(1))
+
+    return rule
 
 
-def _increasing(frames: tuple, at: V.At) -> tuple:
-    if len(frames) > MAX_KEYFRAMES:
-        raise at.fail(f"has {len(frames)} keyframes, at most {MAX_KEYFRAMES} are allowed")
-    for i in range(1, len(frames)):
-        (t0, p0), (t1, p1) = frames[i - 1], frames[i]
-        if not t1 > t0:
-            raise at.index(i).index(0).fail(f"keyframe times must increase: {V.shown(t1)} follows {V.shown(t0)}")
-        distance = math.dist(p0, p1)
-        if distance > MAX_SPEED * (t1 - t0):  # a product: the quotient overflows for times 1e-300 apart
-            raise at.index(i).fail(
-                f"moves {distance:.6g} m in {t1 - t0:.6g} s after the keyframe before it, faster than "
-                f"{MAX_SPEED:g} m/s")
-    return frames
+def _increasing_rule(change: Callable[[tuple, tuple], float], limit: float, moves: str) -> Callable:
+    # keyframes in increasing time, none changing faster than ``limit`` a second: ``change`` is
+    # how much it does between two, and ``moves`` the message (its {amount} and {dt} filled in)
+    def rule(frames: tuple, at: V.At) -> tuple:
+        if len(frames) > MAX_KEYFRAMES:
+            raise at.fail(f"has {len(frames)} keyframes, at most {MAX_KEYFRAMES} are allowed")
+        for i in range(1, len(frames)):
+            (t0, a), (t1, b) = frames[i - 1], frames[i]
+            if not t1 > t0:
+                raise at.index(i).index(0).fail(f"keyframe times must increase: {V.shown(t1)} follows {V.shown(t0)}")
+            amount = change(a, b)
+            if amount > limit * (t1 - t0):  # a product: the quotient overflows for times 1e-300 apart
+                raise at.index(i).fail(moves.format(amount=f"{amount:.6g}", dt=f"{t1 - t0:.6g}"))
+        return frames
+
+    return rule
 
 
 _OFFSET = V.vec3(V.number(ge=-MAX_OFFSET, le=MAX_OFFSET))
+_keyframe = _keyframe_rule(_OFFSET, "[x, y, z]")
+_increasing = _increasing_rule(math.dist, MAX_SPEED, "moves {amount} m in {dt} s after the keyframe before it, faster than "
+                               f"{MAX_SPEED:g} m/s")
 
 
 _FIELDS = V.record({
@@ -208,28 +219,6 @@ def MOTION(value: Any, at: V.At) -> MotionSpec:  # noqa: N802 - a rule, named li
     return MotionSpec(**fields)
 
 
-def _rotation_keyframe(value: Any, at: V.At) -> tuple[float, tuple[float, float, float]]:
-    items = V.items_of(value)
-    if items is None or len(items) != 2:
-        raise at.fail(f"expected a keyframe [time, [rx, ry, rz]], got {V.shown(value)}")
-    return V.number(ge=0.0)(items[0], at.index(0)), _ANGLES(items[1], at.index(1))
-
-
-def _turning_increasing(frames: tuple, at: V.At) -> tuple:
-    if len(frames) > MAX_KEYFRAMES:
-        raise at.fail(f"has {len(frames)} keyframes, at most {MAX_KEYFRAMES} are allowed")
-    for i in range(1, len(frames)):
-        (t0, a0), (t1, a1) = frames[i - 1], frames[i]
-        if not t1 > t0:
-            raise at.index(i).index(0).fail(f"keyframe times must increase: {V.shown(t1)} follows {V.shown(t0)}")
-        turn = sum(abs(q - p) for p, q in zip(a0, a1))
-        if turn > MAX_ANGULAR_SPEED * (t1 - t0):
-            raise at.index(i).fail(
-                f"turns {turn:.6g} degrees (|d rx| + |d ry| + |d rz|) in {t1 - t0:.6g} s after the keyframe before "
-                f"it, faster than {MAX_ANGULAR_SPEED:g} degrees/s")
-    return frames
-
-
 def _angular_speed(w: tuple[float, float, float], at: V.At) -> tuple[float, float, float]:
     speed = math.hypot(*w)
     if speed > MAX_ANGULAR_SPEED:
@@ -238,6 +227,11 @@ def _angular_speed(w: tuple[float, float, float], at: V.At) -> tuple[float, floa
 
 
 _ANGLES = V.vec3(V.number(ge=-MAX_ANGLE, le=MAX_ANGLE))
+_rotation_keyframe = _keyframe_rule(_ANGLES, "[rx, ry, rz]")
+_turning_increasing = _increasing_rule(
+    lambda a, b: sum(abs(q - p) for p, q in zip(a, b)), MAX_ANGULAR_SPEED,
+    "turns {amount} degrees (|d rx| + |d ry| + |d rz|) in {dt} s after the keyframe before it, faster than "
+    f"{MAX_ANGULAR_SPEED:g} degrees/s")
 
 _COLLIDER_FIELDS = V.record({
     "keyframes": V.optional(V.then(V.list_of(_keyframe, nonempty=True, what="keyframes [time, [x, y, z]]"),

@@ -20,6 +20,8 @@ from .shapes import overlaps, overlaps_turning, push_out, push_out_turning
 __all__ = ["Boxes", "CARRY_AT", "CUBOID_CARRY", "CUBOID_COLUMNS", "Group", "POINTS", "TURNS", "collide",
            "collide_rows", "cuboid_surface", "pack", "pose", "reach", "reach_rows"]
 
+# (each kind of rows declares the same things, so the duplicate-code scan pairs this block with
+# capsule.py's by shape; the values are the kind's own)
 #: Columns of a row, and where its carry starts.
 CUBOID_COLUMNS = 19
 CUBOID_CARRY = 16

@@ -86,6 +86,8 @@ def reach_rows(box: np.ndarray, planes: np.ndarray, on: np.ndarray, carry: np.nd
     """Mark the planes the cloth's box (of current and last positions; stretched by each plane's
     carry where something moves) is not wholly on one side of; returns how many were ruled out."""
     skipped = 0
+    # the box widened by the turn or the carry as in sphere.py's reach (the duplicate-code scan
+    # pairs the two by shape): each kind then tests the box its own way inside the same loop
     for o in range(planes.shape[0]):
         lo = 0.0
         hi = 0.0

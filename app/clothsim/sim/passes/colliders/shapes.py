@@ -62,6 +62,28 @@ def ball_surface(x: float, y: float, z: float, cx: float, cy: float, cz: float,
 
 
 @njit(inline="always", **KERNEL)
+def _push_from(pos: np.ndarray, p: int, lx: float, ly: float, lz: float, row: np.ndarray, keep: float, step: float,
+               surface: Any, offset: float) -> None:
+    # point p's relative path from (lx, ly, lz), sampled ``step`` apart: the first sample inside
+    # is pushed out, keeping ``keep`` of the relative motion (the swept passes' one body)
+    x = pos[0, p]
+    y = pos[1, p]
+    z = pos[2, p]
+    n = samples(x - lx, y - ly, z - lz, step)
+    for j in range(1, n + 1):
+        if j < n:
+            s = j / n
+            hit, tx, ty, tz = surface(lx + (x - lx) * s, ly + (y - ly) * s, lz + (z - lz) * s, row, offset)
+        else:
+            hit, tx, ty, tz = surface(x, y, z, row, offset)
+        if hit:
+            pos[0, p] = lx + (tx - lx) * keep
+            pos[1, p] = ly + (ty - ly) * keep
+            pos[2, p] = lz + (tz - lz) * keep
+            return
+
+
+@njit(inline="always", **KERNEL)
 def push_out(pos: np.ndarray, last: np.ndarray, free: np.ndarray, row: np.ndarray, keep: float, step: float,
              cx: float, cy: float, cz: float, surface: Any, offset: float) -> None:
     """One shape's swept pass: each free point's relative path from its last position carried by
@@ -80,21 +102,7 @@ def push_out(pos: np.ndarray, last: np.ndarray, free: np.ndarray, row: np.ndarra
         lx = last[0, p] + cx
         ly = last[1, p] + cy
         lz = last[2, p] + cz
-        x = pos[0, p]
-        y = pos[1, p]
-        z = pos[2, p]
-        n = samples(x - lx, y - ly, z - lz, step)
-        for j in range(1, n + 1):
-            if j < n:
-                s = j / n
-                hit, tx, ty, tz = surface(lx + (x - lx) * s, ly + (y - ly) * s, lz + (z - lz) * s, row, offset)
-            else:
-                hit, tx, ty, tz = surface(x, y, z, row, offset)
-            if hit:
-                pos[0, p] = lx + (tx - lx) * keep
-                pos[1, p] = ly + (ty - ly) * keep
-                pos[2, p] = lz + (tz - lz) * keep
-                break
+        _push_from(pos, p, lx, ly, lz, row, keep, step, surface, offset)
 
 
 @njit(inline="always", **KERNEL)
@@ -106,21 +114,7 @@ def push_out_turning(pos: np.ndarray, last: np.ndarray, free: np.ndarray, row: n
     for k in range(free.shape[0]):
         p = free[k]
         lx, ly, lz = carried(mo, last[0, p], last[1, p], last[2, p])
-        x = pos[0, p]
-        y = pos[1, p]
-        z = pos[2, p]
-        n = samples(x - lx, y - ly, z - lz, step)
-        for j in range(1, n + 1):
-            if j < n:
-                s = j / n
-                hit, tx, ty, tz = surface(lx + (x - lx) * s, ly + (y - ly) * s, lz + (z - lz) * s, row, offset)
-            else:
-                hit, tx, ty, tz = surface(x, y, z, row, offset)
-            if hit:
-                pos[0, p] = lx + (tx - lx) * keep
-                pos[1, p] = ly + (ty - ly) * keep
-                pos[2, p] = lz + (tz - lz) * keep
-                break
+        _push_from(pos, p, lx, ly, lz, row, keep, step, surface, offset)
 
 
 @njit(**KERNEL)
