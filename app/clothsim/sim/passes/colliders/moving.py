@@ -299,9 +299,12 @@ def turn_reach(scene: Any, spec: Any) -> float:
         return math.hypot(*spec.half_extents)
     if kind == "MeshSpec":
         return float(np.linalg.norm(spec.local_vertices(), axis=1).max())
+    from ....cloth import grid_positions
+
     cloth = scene.cloth
-    diagonal = math.hypot(cloth.width, cloth.height)
-    return math.dist(spec.anchor, (0.0, 1.0, 0.0)) + 2.0 * diagonal
+    grid = grid_positions(cloth, scene.simulation.seed)
+    far = float(np.linalg.norm(grid - np.asarray(spec.anchor, dtype=np.float64), axis=1).max())
+    return far + math.hypot(cloth.width, cloth.height)
 
 
 def shift(spec: Any, t: float) -> np.ndarray:
