@@ -13,7 +13,7 @@ from clothsim import Simulation, load_scene
 from clothsim.errors import SceneError
 from clothsim.meshcollider import NEAR_PLANES, rotation_matrix
 from clothsim.objfile import ObjError, parse_obj
-from clothsim.objshapes import TORUS, box_obj, torus_obj
+from clothsim.objshapes import TORUS, box_obj, bundled, torus_obj
 from clothsim.sim.passes.colliders.mesh import closest_on_triangle, mesh_targets
 from clothsim.sim.passes.colliders.meshgrid import INFO_NEAR, INFO_NEAR_OK, PLANE_D, mesh_group
 
@@ -128,6 +128,8 @@ def test_closed_and_open_meshes_are_told_apart_and_inside_out_is_turned(tmp_path
 
 def test_bundled_torus_is_what_the_generator_writes():
     assert (SCENES / "torus.obj").read_text() == torus_obj(*TORUS)
+    for name, text in bundled().items():  # every shipped OBJ (the skirt's cloth too)
+        assert (SCENES / name).read_text() == text, name
     spec = load_scene("mesh").meshes[0]
     assert spec.closed and spec.triangles.shape == (2 * TORUS[2] * TORUS[3], 3)
 

@@ -1,6 +1,9 @@
 """The cloth grid as struct-of-arrays: point positions, pins, springs of three families, and the
 triangles and texture coordinates every mesh of it (renderer, exports, datasets) uses.
 
+A cloth read from an OBJ (``cloth.mesh``, :mod:`clothsim.clothmesh`) has no grid: only
+:func:`pinned_mask` and :func:`cloth_surface` here serve both kinds.
+
 Index convention (the spec's row-major order): point ``(x_index, y_index)`` is
 ``y_index * num_width_points + x_index``. Springs are stored family by family and, inside a
 family, direction by direction in row-major order of their second end point; that order is also
@@ -75,8 +78,11 @@ def grid_positions(cloth: ClothSpec, seed: int) -> np.ndarray:
 
 
 def pinned_mask(cloth: ClothSpec) -> np.ndarray:
-    """Boolean (N,) mask of pinned points."""
+    """Boolean (N,) mask of pinned points (a mesh cloth's ``pinned_vertices`` through its weld)."""
     mask = np.zeros(cloth.num_points, dtype=np.bool_)
+    if cloth.mesh is not None:
+        mask[cloth.mesh.vertex_point[np.asarray(cloth.pinned_vertices, dtype=np.int64)]] = True
+        return mask
     for x, y in cloth.pinned:
         mask[y * cloth.num_width_points + x] = True
     return mask
@@ -190,3 +196,28 @@ def cloth_uvs(nw: int, nh: int) -> np.ndarray:
     v = np.linspace(0.0, 1.0, nh, dtype=np.float32)
     uu, vv = np.meshgrid(u, v)
     return np.ascontiguousarray(np.stack([uu.ravel(), vv.ravel()], axis=1))
+
+
+@dataclass(frozen=True)
+class Surface:
+    """What draws or exports a cloth of either kind: its triangles over the simulated points, and
+    render vertices (a point split where a UV seam runs through it) with their texture coordinates."""
+
+    triangles: np.ndarray  # (T, 3) int64 point indices
+    uv_point: np.ndarray  # (R,) int64 render vertex -> point
+    uvs: np.ndarray  # (R, 2) float32
+    uv_triangles: np.ndarray  # (T, 3) int64, the same triangles over render vertices
+    has_uvs: bool  # False: the uvs are a planar projection (clothsim.clothmesh)
+
+
+def cloth_surface(cloth: ClothSpec) -> Surface:
+    """The cloth's :class:`Surface`: a grid's two triangles a quad and its [0, 1] UVs (one render
+    vertex a point), or a mesh cloth's triangles and render vertices as its OBJ gives them."""
+    m = cloth.mesh
+    if m is not None:
+        return Surface(triangles=m.triangles, uv_point=m.uv_point, uvs=m.uvs, uv_triangles=m.uv_triangles,
+                       has_uvs=m.has_uvs)
+    nw, nh = cloth.num_width_points, cloth.num_height_points
+    triangles = cloth_triangles(nw, nh).reshape(-1, 3).astype(np.int64)
+    return Surface(triangles=triangles, uv_point=np.arange(nw * nh, dtype=np.int64), uvs=cloth_uvs(nw, nh),
+                   uv_triangles=triangles, has_uvs=True)

@@ -27,7 +27,7 @@ import os
 import stat
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable, TypeVar
 
 import numpy as np
 
@@ -37,6 +37,7 @@ from .objfile import ObjError, read_obj
 
 #: Largest scale and translation accepted: far beyond any scene, so that positions stay finite.
 MAX_EXTENT = 1e6
+_T = TypeVar("_T")
 _FRICTION = V.number(ge=0.0, le=1.0)
 
 #: Most triangles a cloth point's list of near triangles holds, per mesh (more: that point asks
@@ -178,11 +179,15 @@ def _path(value: Any, at: V.At) -> str:
     return value
 
 
-_FIELDS = V.record({
+#: The keys that name and place an OBJ (also those of a cloth read from one, :mod:`clothsim.clothmesh`).
+PLACEMENT = {
     "path": V.required(_path),
     "scale": V.default(V.number(gt=0.0, le=MAX_EXTENT), 1.0),
     "translate": V.default(V.vec3(V.number(ge=-MAX_EXTENT, le=MAX_EXTENT)), (0.0, 0.0, 0.0)),
     "rotation": V.default(V.vec3(), (0.0, 0.0, 0.0)),
+}
+_FIELDS = V.record({
+    **PLACEMENT,
     "friction": V.required(_FRICTION),
     "motion": V.default(COLLIDER_MOTION, None),
 })
@@ -194,17 +199,19 @@ def _base_dir(source: str | None) -> Path:
     return Path(source).parent
 
 
-def MESH(value: Any, at: V.At) -> MeshSpec:  # noqa: N802 - a rule, named like the scene's records
-    """The rule for one ``mesh`` object: its fields, then the OBJ file read and checked."""
-    fields = _FIELDS(value, at)
-    here = at.key("path")
-    path = fields["path"]
-    file = _base_dir(at.source) / path if here.files is None else here.files.locate(path, here, "OBJ")
+def obj_file(here: V.At, path: str) -> Path:
+    """Where the OBJ ``path`` of the field ``here`` is: beside the scene file, or through an
+    uploaded scene's files."""
+    return _base_dir(here.source) / path if here.files is None else here.files.locate(path, here, "OBJ")
+
+
+def read_checked(here: V.At, path: str, file: Path, read: Callable[[str], _T]) -> _T:
+    """``read(file)`` (an OBJ reader and the checks on its result); a missing or unreadable file
+    and every :class:`~clothsim.objfile.ObjError` become one line naming ``here`` and ``path``."""
     try:
         if not stat.S_ISREG(os.stat(file).st_mode):  # a FIFO or a device would block the read or never end
             raise here.fail(f"{path}: not a regular file")
-        obj = read_obj(str(file))
-        triangles, closed = check_topology(obj.vertices, obj.triangles, obj.lines)
+        return read(str(file))
     except FileNotFoundError:
         raise here.fail(f"{path}: no such OBJ file (looked for {file})") from None
     except IsADirectoryError:
@@ -213,9 +220,24 @@ def MESH(value: Any, at: V.At) -> MeshSpec:  # noqa: N802 - a rule, named like t
         raise here.fail(f"{path}: cannot read OBJ file: {exc.strerror or exc}") from None
     except ObjError as exc:
         raise here.fail(f"{path}: {exc}") from None
+
+
+def _collider_obj(file: str) -> tuple[np.ndarray, np.ndarray, bool]:
+    obj = read_obj(file)
+    triangles, closed = check_topology(obj.vertices, obj.triangles, obj.lines)
+    return obj.vertices, triangles, closed
+
+
+def MESH(value: Any, at: V.At) -> MeshSpec:  # noqa: N802 - a rule, named like the scene's records
+    """The rule for one ``mesh`` object: its fields, then the OBJ file read and checked."""
+    fields = _FIELDS(value, at)
+    here = at.key("path")
+    path = fields["path"]
+    file = obj_file(here, path)
+    vertices, triangles, closed = read_checked(here, path, file, _collider_obj)
     spec = MeshSpec(path=path, file=str(file), scale=fields["scale"], translate=fields["translate"],
                     rotation=fields["rotation"], friction=fields["friction"], motion=fields["motion"],
-                    vertices=obj.vertices, triangles=triangles, closed=closed)
+                    vertices=vertices, triangles=triangles, closed=closed)
     if not np.isfinite(spec.local_vertices() * 2.0).all():
         raise at.key("scale").fail(f"places the mesh's vertices beyond the float range (scale {spec.scale:g})")
     return spec

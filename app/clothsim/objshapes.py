@@ -1,7 +1,9 @@
-"""Shapes the project makes itself, written as OBJ text: the bundled ``mesh`` scene's torus, and a box.
+"""Shapes the project makes itself, written as OBJ text: the bundled ``mesh`` scene's torus, a box,
+and cloths to read as ``cloth.mesh`` (a flat sheet, an open tube), with texture coordinates.
 
-``python -m clothsim.objshapes`` rewrites ``scenes/torus.obj`` (the file shipped with the ``mesh``
-scene); the test suite checks that the shipped file is exactly what this module writes.
+``python -m clothsim.objshapes`` rewrites the OBJ files shipped in ``scenes/`` (:func:`bundled`:
+the ``mesh`` scene's torus, the ``skirt`` scene's cloth); the test suite checks that each shipped
+file is exactly what this module writes.
 """
 
 from __future__ import annotations
@@ -12,12 +14,69 @@ from pathlib import Path
 
 #: The bundled torus: ring radius, tube radius, segments around the ring and around the tube.
 TORUS = (0.25, 0.09, 32, 12)
+#: The bundled skirt: an open tube's radius, height, quads round and rows up.
+SKIRT = (0.2, 0.45, 48, 16)
 
 
 def _obj(header: str, vertices: list[tuple[float, float, float]], faces: list[tuple[int, ...]]) -> str:
     lines = [f"# {header}", *(f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in vertices),
              *("f " + " ".join(str(i + 1) for i in f) for f in faces)]
     return "\n".join(lines) + "\n"
+
+
+def _obj_uv(header: str, vertices: list[tuple[float, float, float]], uvs: list[tuple[float, float]],
+            faces: list[tuple[int, ...]]) -> str:
+    # one vt per v, in the same order, so a corner names both by one number
+    lines = [f"# {header}", *(f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in vertices),
+             *(f"vt {u:.6f} {v:.6f}" for u, v in uvs),
+             *("f " + " ".join(f"{i + 1}/{i + 1}" for i in f) for f in faces)]
+    return "\n".join(lines) + "\n"
+
+
+def _cell_faces(corner: list[tuple[int, int, int, int]], quads: bool) -> list[tuple[int, ...]]:
+    """Each cell ``(a, b, c, d)`` as a quad, or as the two triangles of its fan from ``a``."""
+    if quads:
+        return list(corner)
+    return [t for a, b, c, d in corner for t in ((a, b, c), (a, c, d))]
+
+
+def sheet_obj(width: float, height: float, nu: int, nv: int, quads: bool = True, seam: bool = False) -> str:
+    """A flat ``width`` x ``height`` rectangle in the xz-plane (y = 0) from the origin, ``nu`` x
+    ``nv`` vertices (row by row along x), faces wound counter-clockwise seen from +y, a ``vt`` per
+    vertex (u along x, v along z). ``seam`` duplicates the middle column (index ``(nu - 1) // 2``):
+    the same positions as new ``v`` lines after the others, with their own ``vt``, used by the
+    cells to its right, as an exporter splitting a texture seam writes it."""
+    verts = [(width * i / (nu - 1), 0.0, height * j / (nv - 1)) for j in range(nv) for i in range(nu)]
+    uvs = [(i / (nu - 1), j / (nv - 1)) for j in range(nv) for i in range(nu)]
+    mid = (nu - 1) // 2
+    if seam:
+        verts += [verts[j * nu + mid] for j in range(nv)]
+        uvs += [uvs[j * nu + mid] for j in range(nv)]
+
+    def at(i: int, j: int, right_of: int) -> int:
+        return nu * nv + j if seam and i == mid and right_of >= mid else j * nu + i
+
+    cells = [(at(i, j, i), at(i, j + 1, i), at(i + 1, j + 1, i), at(i + 1, j, i))
+             for j in range(nv - 1) for i in range(nu - 1)]
+    kind = "quads" if quads else "triangles"
+    return _obj_uv(f"sheet {width} x {height}, {nu} x {nv} vertices, {kind}{', seam' if seam else ''} "
+                   f"(clothsim.objshapes)", verts, uvs, _cell_faces(cells, quads))
+
+
+def tube_obj(radius: float, height: float, around: int, rows: int) -> str:
+    """An open cylinder about the y axis from y = 0 up to ``height`` (a skirt): ``around`` quads
+    round and ``rows`` up, wound outwards. The ``vt`` u wraps from 0 to 1, so the seam column is
+    written twice in ``v`` (the same positions, u = 1), as exporters do."""
+    verts, uvs = [], []
+    for j in range(rows + 1):
+        for i in range(around + 1):
+            a = 2.0 * math.pi * (i % around) / around
+            verts.append((radius * math.cos(a), height * j / rows, radius * math.sin(a)))
+            uvs.append((i / around, j / rows))
+    w = around + 1
+    cells = [(j * w + i, (j + 1) * w + i, (j + 1) * w + i + 1, j * w + i + 1) for j in range(rows) for i in range(around)]
+    return _obj_uv(f"open tube: radius {radius}, height {height}, {around} x {rows} quads (clothsim.objshapes)",
+                   verts, uvs, cells)
 
 
 def torus_obj(ring: float, tube: float, around: int, sides: int) -> str:
@@ -50,11 +109,18 @@ def box_obj(hx: float = 0.5, hy: float = 0.5, hz: float = 0.5, *, drop_top: bool
                 verts, faces)
 
 
+def bundled() -> dict[str, str]:
+    """Every OBJ shipped in ``scenes/``, by file name: the ``mesh`` scene's torus and the
+    ``skirt`` scene's cloth."""
+    return {"torus.obj": torus_obj(*TORUS), "skirt.obj": tube_obj(*SKIRT)}
+
+
 def main(argv: list[str]) -> int:
-    """Write the bundled torus to ``argv[0]`` (default: scenes/torus.obj of this checkout)."""
-    out = Path(argv[0]) if argv else Path(__file__).resolve().parents[2] / "scenes" / "torus.obj"
-    out.write_text(torus_obj(*TORUS), encoding="ascii")
-    print(f"wrote {out}")
+    """Write the bundled OBJ files into the folder ``argv[0]`` (default: scenes/ of this checkout)."""
+    folder = Path(argv[0]) if argv else Path(__file__).resolve().parents[2] / "scenes"
+    for name, text in bundled().items():
+        (folder / name).write_text(text, encoding="ascii")
+        print(f"wrote {folder / name}")
     return 0
 
 

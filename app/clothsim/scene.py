@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 from . import validate as V
 from .errors import ClothsimError, SceneError
@@ -21,6 +21,7 @@ from .colliders import (KINDS, MAX_LENGTH, MIN_LENGTH, BoxSpec, CapsuleSpec, Pla
                         SphereSpec, collider_json)
 from .motion import MOTION, MotionSpec
 from .meshcollider import MeshSpec
+from .clothmesh import CLOTH_MESH, ClothMesh
 from .resources import data_dir
 from .validate import SceneWarning  # noqa: F401 - warned by the rules, imported from here by users
 from .forces import FORCES
@@ -50,6 +51,14 @@ BYTES_PER_POINT_OTHER_INTEGRATORS = 1728
 # grid may have up to 8 cells an element.
 CONTACT_BYTES_PER_POINT = 3584
 CONTACT_SEARCH_BYTES_PER_POINT = 1280
+# What a mesh cloth adds beyond its points (which count as a grid's: BYTES_PER_POINT covers the
+# per-point state and the grid's six springs a point), counted from the arrays' sizes, not measured:
+# a spring's ends, family and rest length in the cloth's springs (17 B) and in the simulator's lists
+# (ends, stiffness, rest, its force buffer, two entries of the points' tables, Provot's copy: about
+# 100 B), 144 B with the 25 %, taken as 192; a triangle's points, render vertices and line in
+# the ClothMesh (56 B) and what the renderer and exporters build from it, taken as 128.
+MESH_BYTES_PER_SPRING = 192
+MESH_BYTES_PER_TRIANGLE = 128
 #: The thread team's most members (clothsim.jit.CHUNKS, not imported here: that loads Numba).
 MOST_MEMBERS = 8
 
@@ -73,10 +82,41 @@ class ClothSpec:
     enable_bending: bool = True
     #: offset of every pinned point over time (``cloth.pin_motion``), None: pins stay put
     pin_motion: MotionSpec | None = None
+    #: the cloth read from an OBJ (``cloth.mesh``); None for the spec's grid. A mesh cloth has no
+    #: grid: width, height and the point counts are 0, orientation HORIZONTAL, ``pinned`` empty.
+    mesh: ClothMesh | None = None
+    #: a mesh cloth's pins: 0-based indices of the OBJ's ``v`` lines (through the weld to points)
+    pinned_vertices: tuple[int, ...] = ()
+
+    @property
+    def is_mesh(self) -> bool:
+        """True for a cloth read from an OBJ (``cloth.mesh``), False for the spec's grid."""
+        return self.mesh is not None
 
     @property
     def num_points(self) -> int:
+        if self.mesh is not None:
+            return int(self.mesh.points.shape[0])
         return self.num_width_points * self.num_height_points
+
+    def as_json(self) -> dict[str, Any]:
+        """The object as a scene file writes it (what loads back to the same cloth); a grid's keys
+        in the order of the fields."""
+        if self.mesh is not None:
+            out: dict[str, Any] = {"mesh": self.mesh.as_json(), "thickness": self.thickness,
+                                   "damping": self.damping, "density": self.density, "ks": self.ks,
+                                   "pinned_vertices": list(self.pinned_vertices)}
+        else:
+            out = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ("mesh", "pinned_vertices")}
+            out["pinned"] = [list(p) for p in self.pinned]
+        for key in ("enable_structural", "enable_shearing", "enable_bending"):
+            out[key] = getattr(self, key)
+        motion = self.pin_motion
+        out.pop("pin_motion", None)
+        if motion is not None:
+            out["pin_motion"] = ({"velocity": list(motion.velocity)} if motion.velocity is not None else
+                                 {"keyframes": [[t, list(p)] for t, p in motion.keyframes]})
+        return out
 
 
 @dataclass(frozen=True)
@@ -259,36 +299,93 @@ def _pinned(done: dict[str, Any]) -> V.Rule:
     return V.list_of(pair, what="[x, y] index pairs")
 
 
-def _pin_motion(done: dict[str, Any]) -> V.Rule:
-    def check(value: Any, at: V.At) -> MotionSpec | None:
-        if value is None:
-            return None
-        motion = MOTION(value, at)
-        if not done.get("pinned"):
-            raise at.fail("the cloth has no pinned points to move (cloth.pinned is empty)")
-        return motion
-    return check
+def _pinned_vertices(done: dict[str, Any]) -> V.Rule:
+    mesh: ClothMesh = done["mesh"]
+    count = int(mesh.vertex_point.shape[0])
+    index = V.integer()
+
+    def one(value: Any, at: V.At) -> int:
+        i = index(value, at)
+        if not 0 <= i < count:
+            raise at.fail(f"vertex index {i} out of range 0..{count - 1} (the OBJ has {count} vertices)")
+        if mesh.vertex_point[i] < 0:
+            raise at.fail(f"vertex {i} is not part of the cloth: no face uses it")
+        return i
+    return V.list_of(one, what="0-based OBJ vertex indices")
+
+
+def _pin_motion(pins: str) -> Any:
+    def depends(done: dict[str, Any]) -> V.Rule:
+        def check(value: Any, at: V.At) -> MotionSpec | None:
+            if value is None:
+                return None
+            motion = MOTION(value, at)
+            if not done.get(pins):
+                raise at.fail(f"the cloth has no pinned points to move (cloth.{pins} is empty)")
+            return motion
+        return check
+    return depends
 
 
 _ORIENTATION = V.choice((), aliases={0: HORIZONTAL, 1: VERTICAL, "horizontal": HORIZONTAL, "vertical": VERTICAL},
                         expected='0/"horizontal" or 1/"vertical"', fold_case=True)
 
-CLOTH = V.record({
-    "width": V.required(V.number(ge=MIN_LENGTH, le=MAX_LENGTH)),
-    "height": V.required(V.number(ge=MIN_LENGTH, le=MAX_LENGTH)),
-    "num_width_points": V.required(V.integer(ge=2, le=MAX_SIDE)),
-    "num_height_points": V.required(V.integer(ge=2, le=MAX_SIDE)),
-    "thickness": V.required(V.number(gt=0.0)),
-    "orientation": V.required(_ORIENTATION),
-    "pinned": V.Field(depends=_pinned, default=()),
+_THICKNESS = V.required(V.number(gt=0.0))
+_MATERIAL = {
     "damping": V.required(V.number(ge=0.0, le=100.0)),
     "density": V.required(V.number(ge=MIN_DENSITY, le=MAX_DENSITY)),
     "ks": V.required(V.number(ge=0.0, le=MAX_KS)),
     "enable_structural": V.default(V.boolean, True),
     "enable_shearing": V.default(V.boolean, True),
     "enable_bending": V.default(V.boolean, True),
-    "pin_motion": V.Field(depends=_pin_motion, default=None),
+}
+_GRID = {
+    "width": V.required(V.number(ge=MIN_LENGTH, le=MAX_LENGTH)),
+    "height": V.required(V.number(ge=MIN_LENGTH, le=MAX_LENGTH)),
+    "num_width_points": V.required(V.integer(ge=2, le=MAX_SIDE)),
+    "num_height_points": V.required(V.integer(ge=2, le=MAX_SIDE)),
+    "thickness": _THICKNESS,
+    "orientation": V.required(_ORIENTATION),
+    "pinned": V.Field(depends=_pinned, default=()),
+    **_MATERIAL,
+    "pin_motion": V.Field(depends=_pin_motion("pinned"), default=None),
+}
+#: The grid's keys, which a mesh cloth takes from its mesh (or, for pins, from ``pinned_vertices``).
+GRID_ONLY = ("width", "height", "num_width_points", "num_height_points", "orientation", "pinned")
+_MESH_CLOTH = V.record({
+    "mesh": V.required(CLOTH_MESH),
+    "thickness": _THICKNESS,
+    "pinned_vertices": V.Field(depends=_pinned_vertices, default=()),
+    **_MATERIAL,
+    "pin_motion": V.Field(depends=_pin_motion("pinned_vertices"), default=None),
 })
+_NO_GRID = {"width": 0.0, "height": 0.0, "num_width_points": 0, "num_height_points": 0, "orientation": HORIZONTAL,
+            "pinned": ()}
+
+
+class _Cloth(V.record):
+    """The ``cloth`` object: the spec's grid, or with ``mesh`` a cloth read from an OBJ. Its own
+    fields (and :meth:`check_one`, the setters') are the grid's."""
+
+    def __call__(self, value: Any, at: V.At) -> dict[str, Any]:
+        if isinstance(value, Mapping) and value.get("mesh") is not None:
+            for key in GRID_ONLY:
+                if key in value:
+                    why = ("pin OBJ vertices with cloth.pinned_vertices" if key == "pinned"
+                           else "the mesh gives the shape")
+                    raise at.key(key).fail(f"not allowed with cloth.mesh ({why})")
+            return {**_NO_GRID, **_MESH_CLOTH(value, at)}
+        if isinstance(value, Mapping) and ("mesh" in value or "pinned_vertices" in value):
+            # a grid written out with every field (``"mesh": null``, no pinned vertices) loads as one
+            pins = value.get("pinned_vertices")
+            if pins is not None and V.items_of(pins) != []:
+                raise at.key("pinned_vertices").fail("only with cloth.mesh (a grid cloth pins [x, y] index "
+                                                     "pairs with cloth.pinned)")
+            value = {k: v for k, v in value.items() if k not in ("mesh", "pinned_vertices")}
+        return super().__call__(value, at)
+
+
+CLOTH = _Cloth(_GRID)
 
 _SIM_DEFAULTS = SimulationSpec()
 SIMULATION = V.record({
@@ -447,7 +544,18 @@ def _check_memory(cloth: ClothSpec, simulation: SimulationSpec, path: str, force
     extra = (sum(kind.bytes_per_point(forces[kind.attr]) for kind in FORCES)
              + sum(kind.bytes_per_point(colliders[kind.attr]) for kind in KINDS))
     need = cloth.num_points * (bytes_per_point(simulation) + extra)
+    mesh = cloth.mesh
+    if mesh is not None:
+        need += mesh.spring_i.shape[0] * MESH_BYTES_PER_SPRING + mesh.triangles.shape[0] * MESH_BYTES_PER_TRIANGLE
     avail = available_memory()
+    if need > avail and mesh is not None:
+        raise SceneError(
+            path,
+            "cloth.mesh.path",
+            f"{mesh.path}: a cloth of {cloth.num_points} points, {mesh.spring_i.shape[0]} springs and "
+            f"{mesh.triangles.shape[0]} triangles would need about {_human_bytes(need)} of memory; only "
+            f"{_human_bytes(avail)} is available",
+        )
     if need > avail:
         raise SceneError(
             path,

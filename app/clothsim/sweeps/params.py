@@ -257,16 +257,8 @@ def build_scene(base: dict[str, Any], params: dict[str, Any], path: str, label: 
 
 def scene_json(scene: Scene) -> dict[str, Any]:
     """A run's full resolved scene (every default filled in) as scene-file JSON."""
-    cloth = dataclasses.asdict(scene.cloth)
-    cloth["pinned"] = [list(p) for p in scene.cloth.pinned]
-    motion = scene.cloth.pin_motion
-    if motion is None:
-        del cloth["pin_motion"]
-    else:
-        cloth["pin_motion"] = ({"velocity": list(motion.velocity)} if motion.velocity is not None else
-                               {"keyframes": [[t, list(p)] for t, p in motion.keyframes]})
     return {
-        "cloth": cloth,
+        "cloth": scene.cloth.as_json(),
         # every kind the scene has; the course's two always (its files name both)
         **{kind.key: [kind.to_json(c) for c in getattr(scene, kind.attr)] for kind in KINDS
            if getattr(scene, kind.attr) or kind.key in ("sphere", "plane")},
