@@ -141,6 +141,9 @@ def run_simulate(args: argparse.Namespace) -> int:
                 rested_at = sim.frame
                 break
     elapsed = time.perf_counter() - start
+    # a grid's triangles follow from its size; a mesh cloth's are written out (check-intersections reads either)
+    shape = ({"faces": sim.surface.triangles} if scene.cloth.is_mesh
+             else {"num_width_points": np.int64(sim.nw), "num_height_points": np.int64(sim.nh)})
     with atomic_output(out, label=args.out) as tmp:
         with open(tmp, "wb") as fh:
             np.savez(
@@ -152,8 +155,7 @@ def run_simulate(args: argparse.Namespace) -> int:
                 simulation_steps=np.int64(scene.simulation.simulation_steps),
                 frames_per_sec=np.float64(scene.simulation.frames_per_sec),
                 seed=np.int64(scene.simulation.seed),
-                num_width_points=np.int64(sim.nw),
-                num_height_points=np.int64(sim.nh),
+                **shape,
             )
     if args.until_rest:
         if rested_at is not None:

@@ -30,6 +30,7 @@ import numpy as np
 
 from ..assets import UploadedFiles
 from ..errors import ClothsimError
+from ..render.camera import cloth_size
 from ..render.settings import SHADERS, RenderSettings
 from ..scene import Scene, bundled_scene_names, check_field, load_scene, parse_scene
 from ..sim.simulation import Simulation
@@ -286,11 +287,13 @@ class Engine:
         sim, s = self.simulation, self.settings
         cloth = sim.scene.cloth
         fixed = None if s.camera_target is None else np.asarray(s.camera_target, dtype=np.float64)
+        # a mesh cloth has no width or height: the view follows its rest points' largest extent
+        width, height = (cloth.width, cloth.height) if not cloth.is_mesh else (cloth_size(cloth),) * 2
         if s.camera_position is None:
-            return Orbit.course_default(cloth.width, cloth.height, fixed)
+            return Orbit.course_default(width, height, fixed)
         target = fixed if fixed is not None else sim.initial_positions.mean(axis=0)
         if np.allclose(s.camera_position, target):
-            return Orbit.course_default(cloth.width, cloth.height, fixed)
+            return Orbit.course_default(width, height, fixed)
         return Orbit.looking(np.asarray(s.camera_position), target, fixed=fixed is not None)
 
     def _say(self, message: dict[str, Any]) -> None:

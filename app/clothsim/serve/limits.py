@@ -56,9 +56,9 @@ def check_scene(scene: Scene, label: str) -> None:
     """Refuse a scene too big or too slow to serve: one line naming ``label``, the field and the bound."""
     cloth = scene.cloth
     if cloth.num_points > MAX_POINTS:
-        raise ClothsimError(f"{label}: cloth: a {cloth.num_width_points}x{cloth.num_height_points} grid has "
-                            f"{cloth.num_points} points; clothsim serve simulates at most {MAX_POINTS} "
-                            "(e.g. 256x256)")
+        shape = ("the mesh" if cloth.is_mesh else f"a {cloth.num_width_points}x{cloth.num_height_points} grid")
+        raise ClothsimError(f"{label}: cloth: {shape} has {cloth.num_points} points; clothsim serve simulates "
+                            f"at most {MAX_POINTS} (e.g. 256x256)")
     check_substeps(scene, scene.simulation.simulation_steps, f"{label}: simulation.simulation_steps")
 
 

@@ -20,11 +20,12 @@ from typing import Any
 import numpy as np
 from numba import njit
 
-from ..cloth import BENDING, BENDING_STIFFNESS_FACTOR, all_springs, enabled_mask, grid_positions, pinned_mask
+from ..cloth import BENDING, BENDING_STIFFNESS_FACTOR, enabled_mask, pinned_mask
 from ..forces import FORCES
 from ..scene import Scene
 from ..jit import EXACT
 from ..jit.compile import on_warm
+from .topology import cloth_springs, mean_mass, point_masses, rest_positions
 
 EXPLICIT_INTEGRATORS = ("verlet", "symplectic_euler")
 
@@ -37,8 +38,8 @@ ENERGY_SLACK = 2.0
 def omega_max(scene: Scene) -> float:
     """Gershgorin bound on the highest angular frequency (rad/s) of the free points' springs."""
     cloth = scene.cloth
-    pos = grid_positions(cloth, scene.simulation.seed)
-    springs = all_springs(cloth.num_width_points, cloth.num_height_points, pos)
+    pos = rest_positions(cloth, scene.simulation.seed)
+    springs = cloth_springs(cloth, pos)
     springs = springs.select(enabled_mask(springs.kind, cloth.enable_structural, cloth.enable_shearing,
                                           cloth.enable_bending))
     k = np.where(springs.kind == BENDING, cloth.ks * BENDING_STIFFNESS_FACTOR, cloth.ks)
@@ -47,8 +48,9 @@ def omega_max(scene: Scene) -> float:
     free = ~pinned_mask(cloth)
     if not free.any():
         return 0.0
-    mass = cloth.width * cloth.height * cloth.density / cloth.num_points
-    return math.sqrt(2.0 * float(total[free].max()) / mass)
+    if cloth.mesh is None:
+        return math.sqrt(2.0 * float(total[free].max()) / mean_mass(cloth))
+    return math.sqrt(2.0 * float((total[free] / point_masses(cloth)[free]).max()))
 
 
 def stable_dt(scene: Scene) -> float:

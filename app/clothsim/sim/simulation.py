@@ -7,7 +7,7 @@ import ctypes
 import numba
 import numpy as np
 
-from ..cloth import (BENDING, BENDING_STIFFNESS_FACTOR, Springs, all_springs, enabled_mask, grid_positions,
+from ..cloth import (BENDING, BENDING_STIFFNESS_FACTOR, STRUCTURAL, Springs, Surface, cloth_surface, enabled_mask,
                      pinned_mask, spring_blocks, spring_streams)
 from ..errors import SimulationBlowUp
 from ..scene import Scene, check_field
@@ -18,7 +18,8 @@ from .passes.colliders import KIND_CALLS, SETS, kind_addresses, plan_colliders
 from .passes.colliders.plane import SURFACE_OFFSET
 from .solvers.frame import CALLS, PASS_ALL, Addresses, kernel_addresses, run_substeps, with_mesh_address
 from .passes.forces import plan_forces
-from .passes.wind import triangles
+from .passes.meshsprings import pack_mesh_springs
+from .topology import cloth_springs, mean_mass, point_masses, rest_positions, spacing
 from ..jit import CHUNKS
 from ..jit.internals import packed_value
 from .passes.pins import move_pins
@@ -64,16 +65,17 @@ class Simulation:
 
             expect(CONTACT_FIRST_RUN_SECONDS)
         cloth = scene.cloth
+        # the grid's size (0 x 0 for a mesh cloth, whose surface is :attr:`surface`)
         self.nw = cloth.num_width_points
         self.nh = cloth.num_height_points
-        n = self.nw * self.nh
-        self.initial_positions = grid_positions(cloth, scene.simulation.seed)
+        n = cloth.num_points
+        self.initial_positions = rest_positions(cloth, scene.simulation.seed)
         # Stored as (3, N) so the kernels stream each coordinate; users see (N, 3) views.
         self._pos = np.ascontiguousarray(self.initial_positions.T)
         self._last = self._pos.copy()
         self.pinned = pinned_mask(cloth)
         self.free = np.flatnonzero(~self.pinned).astype(np.int32)
-        self._all_springs = all_springs(self.nw, self.nh, self.initial_positions)
+        self._all_springs = cloth_springs(cloth, self.initial_positions)
         self._cut = np.zeros(len(self._all_springs), dtype=np.bool_)
         self._forces = np.zeros((3, n))
         self._box = np.zeros(6)
@@ -110,6 +112,7 @@ class Simulation:
         # Extra per-run state of the non-spec integrators (e.g. velocities); None = start afresh.
         self.integrator_state: object = None
         self._crossings_checked = False
+        self._surface: Surface | None = None
         self._replan()
         self._place_pins()
         self._pins_seen = self._pos[:, self._pins].copy()
@@ -194,9 +197,11 @@ class Simulation:
         """Edge-triangle crossings of the cloth as it is now: how many (edge, triangle) pairs of its
         render mesh that share no point have the edge passing through the triangle (exact; see
         :mod:`clothsim.sim.crossings`). Zero for a cloth that does not pass through itself."""
-        from .crossings import count_crossings
+        from .crossings import count_crossings, mesh_crossings
 
-        return count_crossings(self.positions, self.nw, self.nh)
+        if self.scene.cloth.mesh is None:
+            return count_crossings(self.positions, self.nw, self.nh)
+        return mesh_crossings(self.positions, self.surface.triangles)
 
     @property
     def unsafe_substeps(self) -> int:
@@ -251,9 +256,27 @@ class Simulation:
 
     @property
     def mass(self) -> float:
-        """Mass of one point (kg)."""
-        c = self.scene.cloth
-        return c.width * c.height * c.density / c.num_points
+        """Mass of one point (kg): for a mesh cloth, the mean of :attr:`point_mass`."""
+        return mean_mass(self.scene.cloth)
+
+    @property
+    def point_mass(self) -> np.ndarray:
+        """Each point's mass (kg), (N,) float64 (a new array): all :attr:`mass` on a grid; on a
+        mesh cloth a third of each adjacent triangle's area times the density."""
+        return point_masses(self.scene.cloth)
+
+    @property
+    def num_points(self) -> int:
+        """Points of the cloth (N)."""
+        return self._pos.shape[1]
+
+    @property
+    def surface(self) -> Surface:
+        """The cloth's triangles and texture coordinates (:class:`clothsim.cloth.Surface`), for
+        rendering and export, grid or mesh."""
+        if self._surface is None:
+            self._surface = cloth_surface(self.scene.cloth)
+        return self._surface
 
     def _replan(self) -> None:
         """Derive the arrays the kernels see from the current parameters."""
@@ -263,6 +286,9 @@ class Simulation:
         self.springs: Springs = self._all_springs.select(mask)
         self._blocks, _ = spring_blocks(self.nw, self.nh, cloth.enable_structural, cloth.enable_shearing,
                                         cloth.enable_bending)
+        if cloth.mesh is not None:
+            # a mesh's springs are lists (passes/meshsprings.py): no grid blocks, no streams
+            self._blocks = np.zeros((0, 6), dtype=np.int64)
         # Cut springs stay in the arrays (the kernels' block layout needs every spring of a family)
         # with zero stiffness, so they make no force, and a rest length so long that Provot's
         # limit never shortens them; XPBD and the implicit Jacobian skip zero stiffness.
@@ -281,9 +307,10 @@ class Simulation:
             self._cell = np.array([edge, edge, edge])
             self._table = self._start
         else:
-            self._table = self._start[: spec_table_size(self.nw * self.nh) + 1]
-            w = 3.0 * cloth.width / cloth.num_width_points
-            h = 3.0 * cloth.height / cloth.num_height_points
+            self._table = self._start[: spec_table_size(self.num_points) + 1]
+            dw, dh = spacing(cloth, self._all_springs)
+            w = 3.0 * dw
+            h = 3.0 * dh
             self._cell = np.array([w, h, max(w, h)])
         self._stretch_limit = -1.0 if sim.max_stretch is None else 1.0 + sim.max_stretch
         # the clock restarts from the time reached, counting substeps of the (maybe new) length
@@ -303,9 +330,15 @@ class Simulation:
         cloth, sim = self.scene.cloth, self.scene.simulation
         offsets, k, spring_rest, buf = self._stream
         dt = self.dt
+        mesh = None
+        if cloth.mesh is not None:
+            mesh = pack_mesh_springs(self.springs.i, self.springs.j, self._spring_k, self._rest,
+                                     self.springs.kind == STRUCTURAL, self.point_mass, self._gravity)
+        # (a mesh cloth's grid is one point wide: its Provot bands, unused, then divide by 1)
         st = ClothState(self._pos, self._last, self._forces, self.pinned, self._pins, self._blocks, self._rest,
-                        self.nw, offsets, k, spring_rest, buf, self.mass, self._gravity, dt * dt * (1.0 / self.mass),
-                        self._keep, self._stretch_limit, self._skips, np.zeros(CALLS, np.int64))
+                        max(self.nw, 1), offsets, k, spring_rest, buf, self.mass, self._gravity,
+                        dt * dt * (1.0 / self.mass), self._keep, self._stretch_limit, self._skips,
+                        np.zeros(CALLS, np.int64), mesh)
         steps = sim.simulation_steps
         spec = grid = col = None
         if self._self_mode == MODE_SPEC:
@@ -335,7 +368,7 @@ class Simulation:
         thickness = self.scene.cloth.thickness
         old = getattr(self, "_contact", None)
         if old is None or old[0] != thickness:
-            tris = triangles(self.nw, self.nh).astype(np.int64)
+            tris = np.ascontiguousarray(self.surface.triangles.T, dtype=np.int64)
             self._contact = (thickness, contact_group(np.ascontiguousarray(self.initial_positions.T), tris,
                                                       ~self.pinned, thickness))
         return self._contact[1]

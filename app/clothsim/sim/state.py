@@ -40,6 +40,9 @@ class ClothState(NamedTuple):
     #: addresses of the passes the thread team's member calls by address (``CALL_*`` of
     #: :mod:`clothsim.sim.solvers.frame`, filled in by its ``kernel_addresses``); zeros until known
     calls: np.ndarray
+    #: a mesh cloth's springs (:class:`clothsim.sim.passes.meshsprings.MeshSprings`; the grid's
+    #: streams and blocks are then empty); None for a grid cloth
+    mesh: tuple | None = None
 
 
 class SpecHash(NamedTuple):
@@ -135,6 +138,8 @@ class Corrections(NamedTuple):
     #: address of :func:`~clothsim.sim.passes.corrections.corrections_into` for this group's
     #: type, which the integrators' substep calls; 0 until known
     at: int = 0
+    #: a mesh cloth's springs (``ClothState.mesh``), whose Provot limit runs here; None for a grid
+    mesh: tuple | None = None
 
 
 class Plan(NamedTuple):

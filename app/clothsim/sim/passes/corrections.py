@@ -15,6 +15,7 @@ from ...jit import EXACT
 from ...jit.internals import call_native, type_ref
 
 from .provot import provot
+from .meshsprings import mesh_limit
 from .colliders import SET_REACHABLE
 from .selfcollide import self_collide
 from .contact import contact_bound, contact_respond
@@ -39,7 +40,8 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
     contact_group(pos, last, post.contact, True)
     skipped += collide_group(pos, last, post.col, post.colliders, substep, scratch)
     if post.stretch_limit > 0.0:
-        provot(pos, post.pinned, blocks, rest, nw, post.stretch_limit)
+        if not mesh_limit(pos, post.pinned, post.mesh, post.stretch_limit, True):
+            provot(pos, post.pinned, blocks, rest, nw, post.stretch_limit)
     contact_group(pos, last, post.contact, False)
     return skipped
 

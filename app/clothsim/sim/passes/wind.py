@@ -243,8 +243,8 @@ def pack(sim: Any) -> Wind | None:
         return None
     mesh = sim.pass_arrays.get("wind")
     if mesh is None:
-        tris = triangles(sim.nw, sim.nh)
-        mesh = sim.pass_arrays["wind"] = (tris, *incidence(tris, sim.nw * sim.nh), np.zeros((3, tris.shape[1])),
+        tris = np.ascontiguousarray(sim.surface.triangles.T.astype(np.uint64))
+        mesh = sim.pass_arrays["wind"] = (tris, *incidence(tris, sim.num_points), np.zeros((3, tris.shape[1])),
                                           np.zeros((12, tris.shape[1])))
     dt = sim.dt
     return Wind(rows, modes, *mesh, 1.0 / dt, dt, sim.clock)

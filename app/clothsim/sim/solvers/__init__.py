@@ -27,6 +27,7 @@ import numba
 import numpy as np
 
 from ..passes.springs import accumulate_forces
+from ..passes.meshsprings import add_spring_forces
 from ..passes.corrections import corrections_into, has_corrections
 from ..state import Corrections
 from .implicit import CG_MAX_ITERATIONS, CG_TOLERANCE, Implicit
@@ -78,7 +79,7 @@ class IntegratorState:
         self.started = False
         self.iterations = int(getattr(sim, "xpbd_iterations", XPBD_ITERATIONS))
         self.mask = (~sim.pinned).astype(np.float64)
-        self.inv_mass = self.mask / sim.mass
+        self.inv_mass = self.mask / sim.point_mass
         self.scratch = np.zeros((7, 3, n))
         self.cg_iterations = 0
         #: implicit Euler: its last substep's CG iterations, and ``Implicit.at`` (see _advance)
@@ -104,7 +105,7 @@ class IntegratorState:
         """This state, re-bound if the simulation re-planned its springs or stiffness."""
         if self._spring_k is not sim.spring_stiffness or self.mask.shape[0] != sim.pinned.shape[0]:
             self.bind_springs(sim)
-            self.inv_mass = self.mask / sim.mass
+            self.inv_mass = self.mask / sim.point_mass
         return self
 
     def copy(self) -> "IntegratorState":
@@ -120,7 +121,7 @@ def post_args(sim: Any) -> Corrections:
     # the contact mode is a pass of its own (plan.contact), not one of the hash's modes
     mode = 0 if plan.contact is not None else sim.self_mode
     return Corrections(sim.pinned, mode, sim.self_hash(), plan.st.stretch_limit, plan.col, plan.colliders,
-                       plan.contact)
+                       plan.contact, 0, plan.st.mesh)
 
 
 def corrections_address(step: Step, post: Corrections) -> int:
@@ -154,7 +155,7 @@ def advance(sim: Any, steps: int) -> None:
     if steps <= 0:
         return
     threads = numba.get_num_threads()
-    if threads == 1 or sim.nw * sim.nh >= PARALLEL_MIN_POINTS:
+    if threads == 1 or sim.num_points >= PARALLEL_MIN_POINTS:
         _advance(sim, steps)
         return
     numba.set_num_threads(1)  # this thread's setting only
@@ -178,6 +179,7 @@ def _advance(sim: Any, steps: int) -> None:
     if name == "verlet":
         if not st.started:
             accumulate_forces(cloth.pos, cloth.forces, stream, sim.mass, cloth.gravity)
+            add_spring_forces(cloth.mesh, cloth.pos, cloth.forces)
             verlet_start(cloth.pos, cloth.last, st.vel, cloth.forces, sim.free, 1.0 / sim.mass, dt, c)
             st.started = True
         verlet = VerletRate(1.0 / sim.mass)
@@ -192,8 +194,8 @@ def _advance(sim: Any, steps: int) -> None:
         xpbd = Xpbd(st.inv_mass, st.si, st.sj, st.kspr, st.lam, st.iterations)
     else:  # the scene validator only admits the four names above
         raise ValueError(f"unknown integrator {name!r}")
-    step = Step(cloth.pos, cloth.last, st.vel, cloth.forces, sim.free, cloth.blocks, cloth.rest, sim.nw, sim.mass,
-                cloth.gravity, dt, f, phi, fix)
+    step = Step(cloth.pos, cloth.last, st.vel, cloth.forces, sim.free, cloth.blocks, cloth.rest, cloth.nw, sim.mass,
+                cloth.gravity, dt, f, phi, fix, cloth.mesh)
     if st.compiled_for is not plan:
         st.post_at = corrections_address(step, post)
         if implicit is not None:

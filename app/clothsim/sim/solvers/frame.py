@@ -49,6 +49,7 @@ from ..passes.forces import force_gather, force_work
 from ..passes.colliders import SET_COLLIDE, SET_POSE, SET_REACHABLE, kind_kernels, set_kernels
 from ..passes.colliders.bounds import member_bounds, merge_bounds
 from ..passes.provot import provot_bands, provot_bands_of, provot_cuts_of
+from ..passes.meshsprings import mesh_gather, mesh_limit, mesh_work
 from ..passes.springs import gather_one, spring_jobs
 from .verlet import verlet_one
 from ..clock import substep_time
@@ -147,6 +148,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             # the other forces read only positions: same phase as the springs
             w0, w1 = share(CHUNKS, member, size)
             force_work(forces, pos, last, substep, w0, w1)
+            mesh_work(st.mesh, pos, w0, w1)
             if pins is not None:
                 offset_at(pins.times, pins.points, pins.velocity, substep_time(pins.clock, substep + 1, pins.dt), offset)
             gen = barrier(sync, size, gen, np.int64(LAP_FORCES))
@@ -160,6 +162,8 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
             for c in range(lo, hi):
                 call_native(st.calls[CALL_GATHER], (st.offsets, st.buf, st.mass, st.gravity, st.forces, np.int64(c)))
                 force_gather(forces, st.forces, c)
+                # last: a mesh cloth's gather scales the whole force to the point's mass
+                mesh_gather(st.mesh, st.forces, c)
                 call_native(st.calls[CALL_VERLET], (pos, last, st.forces, st.pins, st.h2, st.keep, np.int64(c)))
                 if pins is not None:
                     pin_chunk(pos, last, pins, offset, c)
@@ -269,7 +273,12 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 gen = barrier(sync, size, gen, np.int64(LAP_COLLIDE))
                 if gen < 0:
                     return
-        if provot_on:
+        if provot_on and mesh_limit(pos, st.pinned, st.mesh, st.stretch_limit, member == 0):
+            # a mesh cloth's springs are one list, limited by one member
+            gen = barrier(sync, size, gen, np.int64(LAP_BANDS))
+            if gen < 0:
+                return
+        elif provot_on:
             lo, hi = share(bands, member, size)
             call_native(st.calls[CALL_BANDS], (pos, st.pinned, st.blocks, st.rest, st.nw, st.stretch_limit,
                                                np.int64(lo), np.int64(hi), np.int64(bands)))

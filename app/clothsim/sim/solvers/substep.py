@@ -22,6 +22,7 @@ from numba import njit
 from ...jit import EXACT, KERNEL
 from ..passes.forces import add_forces
 from ..passes.springs import accumulate_forces
+from ..passes.meshsprings import add_spring_forces
 from ...jit.internals import call_native, stack_address
 from ..clock import substep_time
 from ..passes.pins import move_pins, pin_velocities
@@ -55,6 +56,8 @@ class Step(NamedTuple):
     f: float
     phi: float
     fix_velocity: bool
+    #: a mesh cloth's springs (``ClothState.mesh``), None for a grid cloth
+    mesh: tuple | None = None
 
 
 @njit(**KERNEL)
@@ -99,7 +102,7 @@ def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, forces: 
     # the corrections take the collider kinds' groups by address (valid through this call): one
     # compiled corrections kernel for every set of kinds
     post = Corrections(post.pinned, post.self_mode, post.hash, post.stretch_limit, post.col,
-                       stack_address(post.colliders), post.contact, post.at)
+                       stack_address(post.colliders), post.contact, post.at, post.mesh)
     for substep in range(steps):
         # forces: XPBD takes the springs as constraints, and only the other forces as forces. (Each test
         # names a group that is None for XPBD: Numba prunes a branch on an argument that is None,
@@ -114,6 +117,10 @@ def integrate_substeps(steps: int, s: Step, stream: tuple, post: tuple, forces: 
             if xpbd is not None:
                 s.forces[:, :] = 0.0
             add_forces(forces, pos, last, s.forces, substep)
+        if xpbd is None:
+            # last: a mesh cloth's springs, and every force scaled to its point's mass (XPBD
+            # takes the springs as constraints and the masses as its weights)
+            add_spring_forces(s.mesh, pos, s.forces)
         # the integrator's advance
         if verlet is not None:
             verlet_rate_step(pos, last, s.forces, s.free, 1.0 / s.mass, s.dt, s.f, s.phi)

@@ -166,7 +166,7 @@ def mesh_group(scene: Scene, clock: np.ndarray | None = None, dt: float = 0.0) -
         return None
     verts, tris, fnorm, enorm, vnorm, starts, cells = ([] for _ in range(7))
     info = np.zeros((len(scene.meshes), 11))
-    n_points = scene.cloth.num_width_points * scene.cloth.num_height_points
+    n_points = scene.cloth.num_points
     thickness = scene.cloth.thickness
     dims = np.zeros((len(scene.meshes), 7), dtype=np.int64)
     pose = np.zeros((len(scene.meshes), 6))
