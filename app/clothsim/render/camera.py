@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -11,7 +12,7 @@ import numpy as np
 # little to the side so that both a hanging cloth (pinned2) and a drape (sphere) read in depth.
 DEFAULT_AZIMUTH_DEG = 25.0
 DEFAULT_ELEVATION_DEG = 35.0
-VIEW_DISTANCE_FACTOR = 2.0 * 0.9  # distance = 2 * 0.9 * max(width, height), as in the course
+VIEW_DISTANCE_FACTOR = 2.0 * 0.9  # distance = 2 * 0.9 * max(width, height), as in the course (cloth_size)
 # Images are drawn upside down (clip-space y negated) so that GL's bottom-up rows read back as a
 # top-down image with no copy.
 FLIP_Y = np.diag([1.0, -1.0, 1.0, 1.0])
@@ -62,6 +63,15 @@ class Camera:
 def default_target(positions: np.ndarray) -> np.ndarray:
     """The cloth's centroid: the default camera follows the cloth wherever it falls."""
     return positions.mean(axis=0)
+
+
+def cloth_size(cloth: Any) -> float:
+    """The size the default view distance follows: a grid cloth's ``max(width, height)``, a mesh
+    cloth's largest extent of its rest points' bounding box (it has no width or height)."""
+    if getattr(cloth, "is_mesh", False):
+        points = np.asarray(cloth.mesh.points, dtype=np.float64).reshape(-1, 3)
+        return float((points.max(axis=0) - points.min(axis=0)).max()) if points.size else 0.0
+    return max(cloth.width, cloth.height)
 
 
 def default_position(target: np.ndarray, width: float, height: float) -> np.ndarray:

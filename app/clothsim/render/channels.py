@@ -83,20 +83,19 @@ def draw_channels(renderer: Any, state: Any, view: ViewCamera,
     what it draws (``Renderer.render``'s ``simulation``)."""
     import moderngl
 
-    from . import mesh  # Numba: loaded by the renderer only
-
     if (view.width, view.height) != (renderer.width, renderer.height):
         raise ValueError(f"view is {view.width}x{view.height}, renderer {renderer.width}x{renderer.height}")
     ctx = renderer.ctx
     with ctx:
         targets = renderer._channel_targets()
-        buffers = renderer._cloth_buffers(state.nw, state.nh)
+        buffers = renderer._cloth_buffers(state)
         positions = np.ascontiguousarray(state.positions, dtype=np.float64)
-        mesh.update_cloth_vertices(positions, state.nw, state.nh, False, buffers.vertices)
+        buffers.geometry.fill(positions, False, buffers.vertices)
         buffers.vbo.write(buffers.vertices)
         nxt = positions if next_positions is None else np.asarray(next_positions, dtype=np.float64)
         next_vbo = renderer._next_buffer(buffers)
-        next_vbo.write(np.ascontiguousarray(nxt, dtype=np.float32))
+        # (per render vertex: a mesh cloth's seam copies of a point move with it)
+        next_vbo.write(np.ascontiguousarray(buffers.geometry.per_vertex(nxt), dtype=np.float32))
 
         targets.fbo.use()
         ctx.viewport = (0, 0, view.width, view.height)

@@ -1,8 +1,10 @@
 """Mesh data: cloth triangles/uvs and per-frame normals/tangents, the UV sphere, the plane quad.
 
 The cloth's vertex stream is one float32 array of shape (N, 9): position, normal, tangent.
-It is refilled in place every frame by :func:`update_cloth_vertices` and uploaded as one VBO
-write. UVs and triangle indices never change, so they live in static buffers.
+It is refilled in place every frame by :func:`update_cloth_vertices` (a grid) or
+:func:`update_surface_vertices` (a mesh cloth: one row per render vertex, R >= N where UV seams
+split a point) and uploaded as one VBO write. UVs and triangle indices never change, so they
+live in static buffers.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from ..cloth import cloth_triangles, cloth_uvs  # noqa: F401 - the grid's, drawn here
 from ..jit import EXACT
@@ -113,6 +115,83 @@ def update_cloth_vertices(positions, nw, nh, with_tangents, out):  # pragma: no 
             out[p, 6] = 0.0
             out[p, 7] = 0.0
             out[p, 8] = 0.0
+
+
+@njit(**EXACT)
+def update_surface_vertices(positions, triangles, uv_point, uvs, uv_triangles, with_tangents,
+                            out):  # pragma: no cover - compiled
+    """Fill ``out`` (R, 9) float32, one row per render vertex of a cloth surface, with its point's
+    position, unit normal and (optionally) unit tangent.
+
+    ``triangles`` (T, 3) index the simulated points ``positions`` (N, 3); ``uv_triangles`` (T, 3)
+    the same triangles over the render vertices, which ``uv_point`` (R,) maps to points and
+    ``uvs`` (R, 2) float64 place in texture space. Normals are area-weighted per simulated point,
+    as the grid's are, and gathered per render vertex: the copies of a point split by a UV seam
+    get one normal, so the seam shows no crease. Tangents follow +u of each render vertex's own
+    uvs (a seam may turn u): each triangle adds dP/du times its uv area to its render corners,
+    then Gram-Schmidt against the normal. Triangles are taken in order, so a grid given as a
+    surface sums the same terms in the same order as :func:`update_cloth_vertices`.
+    """
+    n_points = positions.shape[0]
+    n_vertices = uv_point.shape[0]
+    acc_n = np.zeros((n_points, 3))
+    acc_t = np.zeros((n_vertices, 3))
+    for f in range(triangles.shape[0]):
+        i0, i1, i2 = triangles[f, 0], triangles[f, 1], triangles[f, 2]
+        e1x = positions[i1, 0] - positions[i0, 0]
+        e1y = positions[i1, 1] - positions[i0, 1]
+        e1z = positions[i1, 2] - positions[i0, 2]
+        e2x = positions[i2, 0] - positions[i0, 0]
+        e2y = positions[i2, 1] - positions[i0, 1]
+        e2z = positions[i2, 2] - positions[i0, 2]
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        for k in range(3):
+            v = triangles[f, k]
+            acc_n[v, 0] += nx
+            acc_n[v, 1] += ny
+            acc_n[v, 2] += nz
+        if with_tangents:
+            r0, r1, r2 = uv_triangles[f, 0], uv_triangles[f, 1], uv_triangles[f, 2]
+            s1 = uvs[r1, 0] - uvs[r0, 0]
+            t1 = uvs[r1, 1] - uvs[r0, 1]
+            s2 = uvs[r2, 0] - uvs[r0, 0]
+            t2 = uvs[r2, 1] - uvs[r0, 1]
+            det = s1 * t2 - s2 * t1
+            if det != 0.0:
+                # dP/du scaled by |det| (the uv area), as the grid's kernel weighs it
+                sgn = 1.0 if det > 0.0 else -1.0
+                tx = (e1x * t2 - e2x * t1) * sgn
+                ty = (e1y * t2 - e2y * t1) * sgn
+                tz = (e1z * t2 - e2z * t1) * sgn
+                for k in range(3):
+                    v = uv_triangles[f, k]
+                    acc_t[v, 0] += tx
+                    acc_t[v, 1] += ty
+                    acc_t[v, 2] += tz
+    for r in range(n_vertices):
+        p = uv_point[r]
+        out[r, 0] = positions[p, 0]
+        out[r, 1] = positions[p, 1]
+        out[r, 2] = positions[p, 2]
+        nx, ny, nz = _unit(acc_n[p, 0], acc_n[p, 1], acc_n[p, 2], 0.0, 1.0, 0.0)
+        out[r, 3] = nx
+        out[r, 4] = ny
+        out[r, 5] = nz
+        if with_tangents:
+            tx = acc_t[r, 0]
+            ty = acc_t[r, 1]
+            tz = acc_t[r, 2]
+            dot = tx * nx + ty * ny + tz * nz
+            tx, ty, tz = _unit(tx - dot * nx, ty - dot * ny, tz - dot * nz, 1.0, 0.0, 0.0)
+            out[r, 6] = tx
+            out[r, 7] = ty
+            out[r, 8] = tz
+        else:
+            out[r, 6] = 0.0
+            out[r, 7] = 0.0
+            out[r, 8] = 0.0
 
 
 def sphere_mesh(lat: int, lon: int) -> tuple[np.ndarray, np.ndarray]:
@@ -245,3 +324,23 @@ def _warm() -> None:
 
 
 on_warm("3 render mesh", _warm)
+
+
+def _warm_surface() -> None:
+    tri = np.array([[0, 2, 1], [1, 2, 3]], dtype=np.int64)
+    update_surface_vertices(np.zeros((4, 3)), tri, np.arange(4, dtype=np.int64), np.zeros((4, 2)), tri, True,
+                            np.zeros((4, CLOTH_FLOATS), dtype=np.float32))
+
+
+# The renderer's call: positions, point triangles, vertex -> point, uvs, vertex triangles, tangents, out.
+_INDEX = types.Array(types.int64, 1, "C")
+_TRIS = types.Array(types.int64, 2, "C")
+_SURFACE_SIGNATURE = (types.Array(types.float64, 2, "C"), _TRIS, _INDEX, types.Array(types.float64, 2, "C"), _TRIS,
+                      types.boolean, types.Array(types.float32, 2, "C"))
+
+
+def register_surface_warm() -> None:
+    """Have :func:`~clothsim.jit.compile.warm_side_kernels` compile (or load) the surface kernel;
+    done for mesh cloths only (:meth:`Renderer.prepare <clothsim.render.renderer.Renderer.prepare>`,
+    :func:`~clothsim.render.pipeline.clip_frames`), so that a grid's cold start does not pay for it."""
+    on_warm("3 render surface", _warm_surface, beside=((update_surface_vertices, _SURFACE_SIGNATURE),))

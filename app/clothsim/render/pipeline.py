@@ -23,7 +23,7 @@ import numpy as np
 from ..cloth import Springs
 from ..jit.compile import warm_side_kernels
 from ..scene import Scene
-from . import mesh  # noqa: F401 - registers the drawing's kernel for warm_side_kernels
+from . import mesh  # registers the drawing's kernel for warm_side_kernels
 
 #: Drawn frames the simulation thread may run ahead of the drawing; two keep it busy through a
 #: long draw without holding more than a few copies of the positions.
@@ -35,18 +35,22 @@ class Snapshot:
     """A simulation's state at one frame: what :meth:`Renderer.render` reads from it."""
 
     scene: Scene
-    nw: int
+    nw: int  # 0 for a mesh cloth (drawn from ``surface``)
     nh: int
     positions: np.ndarray
     springs: Springs
     live_springs: Springs
     time: float
     frame: int
+    surface: Any = None  # a mesh cloth's clothsim.cloth.Surface (computed once by the Simulation)
 
     @classmethod
     def of(cls, sim: Any) -> "Snapshot":
+        # (a grid's surface is not read: a grid is drawn from nw x nh)
+        surface = getattr(sim, "surface", None) if sim.nw == 0 else None
         return cls(scene=sim.scene, nw=sim.nw, nh=sim.nh, positions=np.array(sim.positions, dtype=np.float64),
-                   springs=sim.springs, live_springs=sim.live_springs, time=float(sim.time), frame=int(sim.frame))
+                   springs=sim.springs, live_springs=sim.live_springs, time=float(sim.time), frame=int(sim.frame),
+                   surface=surface)
 
 
 @dataclass
@@ -157,6 +161,8 @@ def _threaded(plan: _Plan, ahead: int) -> Iterator[Snapshot | None]:
     # kernel, loading it, at the moment the thread's first frame loads the simulation's, failed
     # in Numba's typing registry ("generator already executing"; seen once in CI). So the kernels
     # this thread's consumer calls are loaded before the thread starts.
+    if getattr(plan.sim.scene.cloth, "is_mesh", False):
+        mesh.register_surface_warm()
     warm_side_kernels()
     worker = threading.Thread(target=run, name="clothsim-simulate", daemon=True)
     worker.start()

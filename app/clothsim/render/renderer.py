@@ -1,10 +1,10 @@
 """The renderer: draws a simulation's current state with one look and reads the image back.
 
 Per frame it computes the cloth's normals (and tangents for the looks that need them) with a
-Numba kernel, writes them into ONE dynamic vertex buffer, draws cloth, spheres and planes into
-a multisampled framebuffer, resolves it and reads back RGB bytes. Everything else (programs,
-index buffers, sphere/plane meshes, textures) is built once and cached, so a Renderer is meant
-to be reused across frames and scenes.
+Numba kernel, over the grid or over a mesh cloth's surface (drawn.py), writes them into ONE
+dynamic vertex buffer, draws cloth, spheres and planes into a multisampled framebuffer, resolves
+it and reads back RGB bytes. Everything else (programs, index buffers, sphere/plane meshes,
+textures) is built once and cached, so a Renderer is meant to be reused across frames and scenes.
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ from ..colliders import KINDS
 from ..scene import Scene, available_memory
 from ..sim.passes.colliders.moving import placement
 from . import mesh, textures
-from .camera import FLIP_Y, Camera, default_position, default_target
+from .camera import FLIP_Y, Camera, cloth_size, default_position, default_target
+from .drawn import ClothGeometry, drawn_surface, grid_geometry, surface_geometry, surface_name
 from .context import create_context
 from .overlap import covers_once, register_warm
 from .programs import IDS, Programs, set_matrix, set_uniform
@@ -86,18 +87,18 @@ class ClothState(Protocol):
     """What the renderer reads from a simulation (``clothsim.Simulation`` has all of it)."""
 
     scene: Scene
-    nw: int
+    nw: int  # the grid's points across and down; 0 for a mesh cloth, drawn from ``surface``
     nh: int
-    positions: np.ndarray  # (nw*nh, 3) float64, row-major
+    positions: np.ndarray  # (N, 3) float64; a grid's row-major
     springs: Springs
     live_springs: Springs  # the springs that act (enabled, not cut): what the wireframe draws
+    # (a mesh cloth's state also has ``surface``, a clothsim.cloth.Surface: see drawn.py)
 
 
 @dataclass
 class _ClothBuffers:
-    nw: int
-    nh: int
-    vertices: np.ndarray  # (N, 9) float32, refilled every frame
+    geometry: ClothGeometry
+    vertices: np.ndarray  # (R, 9) float32, refilled every frame
     vbo: Any
     uv_vbo: Any
     tri_ibo: Any
@@ -138,7 +139,7 @@ class Renderer:
             self.ctx.release()
             raise
         self._cloth: _ClothBuffers | None = None
-        self._springs: Springs | None = None
+        self._springs: tuple[Springs, Any] | None = None  # the springs drawn and their point -> vertex map
         self._spring_ibo: Any = None
         self._spring_ranges: list[tuple[int, int, int]] = []  # (family, first index, count)
         # (vertex buffer, index buffer, the indices (3T,) uint32) of each collider shape drawn
@@ -160,6 +161,7 @@ class Renderer:
         # glFinish and glReadPixels without the GIL, so that a simulation thread runs while the
         # driver draws (see waits.py); None: moderngl's own calls.
         self._gl = gl_calls()
+        self._warned_uvs: set[str] = set()  # the mesh cloths without UVs warned about
         self.timings: dict[str, float] = dict.fromkeys(STAGES, 0.0)
 
     # -- public --------------------------------------------------------------------------------
@@ -179,10 +181,9 @@ class Renderer:
         # GL calls go to the thread's current context: make ours current, so that several
         # renderers (each with its own context) can be used side by side.
         with self.ctx:
-            buffers = self._cloth_buffers(simulation.nw, simulation.nh)
-            mesh.update_cloth_vertices(np.ascontiguousarray(simulation.positions, dtype=np.float64),
-                                       simulation.nw, simulation.nh, look in USES_TANGENTS,
-                                       buffers.vertices)
+            buffers = self._cloth_buffers(simulation)
+            buffers.geometry.fill(np.ascontiguousarray(simulation.positions, dtype=np.float64),
+                                  look in USES_TANGENTS, buffers.vertices)
             t1 = time.perf_counter()
             buffers.vbo.write(buffers.vertices)
             t2 = time.perf_counter()
@@ -204,13 +205,15 @@ class Renderer:
         return draw_channels(self, simulation, view, next_positions)
 
     def prepare(self, scene: Scene, look: str) -> None:
-        """Get ready to draw ``scene`` with ``look`` in a clip: a scene that draws the cloth alone
-        or over one plane has its frames tested for overlap (overlap.py), and a look that moves
-        its vertices is drawn from an id pass's triangles on llvmpipe (seen.py); the kernel each
-        needs is then compiled (or loaded) with the other side kernels, before a clip's
-        simulation thread starts and, on a cold start, beside the simulation's first plan.
-        (Without this, the first frame compiles it.)"""
-        if self._in_order(scene, look):
+        """Get ready to draw ``scene`` with ``look`` in a clip: a mesh cloth is drawn by the surface
+        kernel (drawn.py), a grid scene that draws the cloth alone or over one plane has its frames
+        tested for overlap (overlap.py), and a look that moves its vertices is drawn from an id
+        pass's triangles on llvmpipe (seen.py); the kernel each needs is then compiled (or loaded)
+        with the other side kernels, before a clip's simulation thread starts and, on a cold
+        start, beside the simulation's first plan. (Without this, the first frame compiles it.)"""
+        if getattr(scene.cloth, "is_mesh", False):
+            mesh.register_surface_warm()  # (and no overlap test: a mesh cloth draws with the depth test)
+        elif self._in_order(scene, look):
             register_warm()
         if self._picks and look != "wireframe" and not self.programs.places_as_given(look):
             register_seen_warm()
@@ -227,7 +230,8 @@ class Renderer:
         """The camera ``settings`` ask for; unset parts follow the course's defaults.
 
         The default target is the cloth's current centroid, so a default camera tracks the
-        cloth; give ``camera_target`` for a fixed one.
+        cloth; give ``camera_target`` for a fixed one. The default distance follows the cloth's
+        size (:func:`~.camera.cloth_size`).
         """
         scene = simulation.scene
         if settings.camera_target is not None:
@@ -237,7 +241,8 @@ class Renderer:
         if settings.camera_position is not None:
             position = np.asarray(settings.camera_position, dtype=np.float64)
         else:
-            position = default_position(target, scene.cloth.width, scene.cloth.height)
+            size = cloth_size(scene.cloth)
+            position = default_position(target, size, size)
         if np.allclose(position, target):
             raise ClothsimError("camera position and target coincide")
         return Camera(position, target, settings.fov, settings.near, settings.far)
@@ -319,29 +324,51 @@ class Renderer:
         return f"{self.samples}x multisampling" if self.samples else "no multisampling"
 
     # -- per-scene resources ---------------------------------------------------------------
-    def _cloth_buffers(self, nw: int, nh: int) -> _ClothBuffers:
+    def _cloth_buffers(self, state: ClothState) -> _ClothBuffers:
+        """The buffers of ``state``'s cloth: its grid's, or its surface's for a mesh cloth (made
+        once per grid size or surface object)."""
+        nw, nh = state.nw, state.nh
+        surface = drawn_surface(state)
         b = self._cloth
-        if b is not None and (b.nw, b.nh) == (nw, nh):
+        if b is not None and b.geometry.fits(nw, nh, surface):
             return b
+        if surface is None:
+            geometry = grid_geometry(nw, nh)
+        else:
+            geometry = surface_geometry(surface, int(np.shape(state.positions)[0]))
+            self._warn_without_uvs(state.scene, surface)
         if b is not None:
             for obj in (b.vbo, b.uv_vbo, b.tri_ibo, b.next_vbo):
                 if obj is not None:
                     obj.release()
             self._drop_vaos("cloth")
-        vertices = np.zeros((nw * nh, mesh.CLOTH_FLOATS), dtype=np.float32)
-        tris = mesh.cloth_triangles(nw, nh)
+        vertices = np.zeros((geometry.vertex_count, mesh.CLOTH_FLOATS), dtype=np.float32)
         self._cloth = _ClothBuffers(
-            nw=nw, nh=nh, vertices=vertices,
+            geometry=geometry, vertices=vertices,
             vbo=self.ctx.buffer(reserve=vertices.nbytes, dynamic=True),
-            uv_vbo=self.ctx.buffer(mesh.cloth_uvs(nw, nh)),
-            tri_ibo=self.ctx.buffer(tris),
-            triangles=tris,
+            uv_vbo=self.ctx.buffer(geometry.uvs),
+            tri_ibo=self.ctx.buffer(geometry.triangles),
+            triangles=geometry.triangles,
         )
         return self._cloth
 
+    def _warn_without_uvs(self, scene: Scene, surface: Any) -> None:
+        """One warning line per mesh cloth without UVs and renderer (a render run): its textures
+        are laid on by the planar projection ``cloth_surface`` made instead."""
+        if surface.has_uvs:
+            return
+        name = surface_name(scene.cloth)
+        if name in self._warned_uvs:
+            return
+        self._warned_uvs.add(name)
+        import warnings
+
+        warnings.warn(f"{name}: the cloth mesh has no UVs (texture coordinates); its textures use a planar "
+                      "projection", UserWarning, stacklevel=4)
+
     def _next_buffer(self, buffers: _ClothBuffers) -> Any:
         if buffers.next_vbo is None:
-            buffers.next_vbo = self.ctx.buffer(reserve=buffers.nw * buffers.nh * 12, dynamic=True)
+            buffers.next_vbo = self.ctx.buffer(reserve=buffers.geometry.vertex_count * 12, dynamic=True)
         return buffers.next_vbo
 
     def _channel_targets(self) -> Any:
@@ -351,12 +378,18 @@ class Renderer:
             self._channels = _Targets(self.ctx, self.width, self.height)
         return self._channels
 
-    def _spring_buffer(self, springs: Springs) -> None:
-        if self._springs is springs:
+    def _spring_buffer(self, springs: Springs, point_vertex: np.ndarray | None = None) -> None:
+        """The wireframe's index buffer: the springs family by family, as pairs of render vertices
+        (``point_vertex`` maps a mesh cloth's points to them; None: the same numbers, a grid)."""
+        if self._springs is not None and self._springs[0] is springs and self._springs[1] is point_vertex:
             return
+        springs_in = springs
         if self._spring_ibo is not None:
             self._spring_ibo.release()
             self._drop_vaos("springs")
+        if point_vertex is not None:
+            i, j = point_vertex[springs.i], point_vertex[springs.j]
+            springs = Springs(i, j, springs.rest, springs.kind).select((i >= 0) & (j >= 0))
         order = np.argsort(springs.kind, kind="stable")
         pairs = np.stack([springs.i[order], springs.j[order]], axis=1).astype(np.uint32)
         # A GL buffer cannot be empty: a cloth with every family disabled gets a dummy index.
@@ -369,7 +402,7 @@ class Renderer:
             if n:
                 self._spring_ranges.append((family, first, n))
             first += n
-        self._springs = springs
+        self._springs = (springs_in, point_vertex)
 
     def _sphere(self, resolution: tuple[int, int]) -> tuple[Any, Any, np.ndarray]:
         if resolution not in self._spheres:
@@ -571,7 +604,8 @@ class Renderer:
         cloth on the same side of it, so that the cloth drawn after the plane hides what it
         would hide with the test (the plane is pushed back in depth besides)."""
         scene = sim.scene
-        if not self._in_order(scene, look):
+        # (the test below knows a grid's triangles and border; a mesh cloth draws with the depth test)
+        if buffers.geometry.surface is not None or not self._in_order(scene, look):
             return False
         now = float(getattr(sim, "time", 0.0))
         for plane in scene.planes:
@@ -582,7 +616,8 @@ class Renderer:
             heights = (buffers.vertices[:, :3].astype(np.float64) @ normal - base) * np.sign(side)
             if not heights.min() > PLANE_MARGIN * float(np.linalg.norm(normal)):
                 return False
-        return bool(covers_once(buffers.vertices, sim.nw, sim.nh, view_projection, self.width, self.height))
+        return bool(covers_once(buffers.vertices, buffers.geometry.nw, buffers.geometry.nh, view_projection,
+                                self.width, self.height))
 
     def _draw_colliders(self, prog: Any, look: str, sim: ClothState, settings: RenderSettings,
                         mark: Callable[[int], None] | None = None) -> None:
@@ -680,7 +715,7 @@ class Renderer:
                         buffers: _ClothBuffers) -> None:
         import moderngl
 
-        self._spring_buffer(sim.live_springs)
+        self._spring_buffer(sim.live_springs, buffers.geometry.point_vertex)
         vao = self._vao("wireframe", "springs", None, lambda p: self.ctx.vertex_array(
             p, [(buffers.vbo, "3f 24x", "in_position")], self._spring_ibo, index_element_size=4))
         set_matrix(prog, "u_model", np.eye(4))
