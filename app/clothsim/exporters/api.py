@@ -4,7 +4,9 @@ The output path picks the format: ``.usd``, ``.usda`` or ``.usdc`` is one USD st
 ``usd`` extra, usd-core); a path with no suffix, a trailing slash, or an existing folder is a
 folder of ``cloth_NNNNN.obj`` files plus ``colliders.obj``. Frames ``0, K, 2K, ...`` are exported,
 and the last simulated frame N always (so the file's last frame is the state ``clothsim simulate
---frames N`` saves). Outputs go through :func:`~clothsim.atomic.atomic_output`: they appear whole
+--frames N`` saves). With ``out_fps`` the clip is resampled to that frame rate instead
+(:mod:`.timing`): frame numbers count frames at that rate, and a moment between two simulated
+frames gets their linear interpolation. Outputs go through :func:`~clothsim.atomic.atomic_output`: they appear whole
 or not at all, and an existing folder is written into only if it holds nothing but an earlier
 sequence.
 """
@@ -24,7 +26,8 @@ from ..sim import Simulation
 from ..sweeps.runner import sample_frames
 from ..validate import check, integer
 from . import obj, usd
-from .geometry import ClothNormals, cloth_faces, cloth_uvs, colliders
+from .geometry import ClothNormals, cloth_geometry, colliders
+from .timing import Sample, blend, check_out_fps, exported_samples
 
 __all__ = ["FORMATS", "check_export_output", "export", "export_format", "exported_frames"]
 
@@ -74,7 +77,7 @@ def exported_frames(start: int, frames: int, every: int) -> list[int]:
 
 
 def export(simulation_or_scene: Simulation | Scene | str | os.PathLike[str], out: str | os.PathLike[str],
-           frames: int = 90, every: int = 1, *, progress: bool = False) -> list[int]:
+           frames: int = 90, every: int = 1, *, out_fps: float | None = None, progress: bool = False) -> list[int]:
     """Simulate and write the cloth's animation to ``out``; return the frame numbers written.
 
     ``simulation_or_scene`` is a :class:`~clothsim.Simulation` (run on from its current frame and
@@ -83,52 +86,74 @@ def export(simulation_or_scene: Simulation | Scene | str | os.PathLike[str], out
     every ``every``-th frame is written, starting with the current one, plus the last frame.
     ``out`` ending in ``.usd``/``.usda``/``.usdc`` is a USD stage (needs ``usd-core``: ``pip
     install 'clothsim[usd]'``); a folder is an OBJ sequence (``cloth_00000.obj``, ...,
-    ``colliders.obj``). ``progress`` shows a progress bar on a terminal.
+    ``colliders.obj``). ``out_fps`` (frames a second) resamples the clip to that rate: frame k
+    is the moment k / out_fps s, positions interpolated linearly between simulated frames, every
+    ``every``-th such frame written (default: the scene's frames_per_sec, no resampling). The
+    returned numbers are the written frames at the output rate. ``progress`` shows a progress
+    bar on a terminal.
 
     Raises :class:`~clothsim.ClothsimError` (one line) for a bad output, count or scene, a missing
     extra, or a simulation that blows up; nothing is written then.
     """
     frames = check(integer(ge=0), frames, "frames")
     every = check(integer(ge=1), every, "every")
+    out_fps = check_out_fps(out_fps, "out_fps")
     fmt = check_export_output(out)
     if isinstance(simulation_or_scene, Simulation):
         sim = simulation_or_scene
     else:
         scene = simulation_or_scene if isinstance(simulation_or_scene, Scene) else load_scene(simulation_or_scene)
         sim = Simulation(scene)
-    return _write(sim, fmt, out, frames, every, progress)
+    return _write(sim, fmt, out, frames, every, progress, out_fps)
 
 
-def _write(sim: Simulation, fmt: str, out: str | os.PathLike[str], frames: int, every: int, progress: bool) -> list[int]:
+def _write(sim: Simulation, fmt: str, out: str | os.PathLike[str], frames: int, every: int, progress: bool,
+           out_fps: float | None = None, field: str = "out_fps") -> list[int]:
     from ..commands import progress as progress_bar
 
     dest, label = _destination(out)
     scene = sim.scene
-    numbers = exported_frames(sim.frame, frames, every)
-    wanted = set(numbers)
-    faces = cloth_faces(sim.nw, sim.nh)
-    uvs = cloth_uvs(sim.nw, sim.nh)
-    normals = ClothNormals(sim.nw, sim.nh)
+    sim_fps = float(scene.simulation.frames_per_sec)
+    samples = exported_samples(sim.frame, frames, every, sim_fps, out_fps, field)
+    numbers = [s.code for s in samples]
+    # Simulated frames whose state a sample needs (one between two frames needs both).
+    needed = {s.frame for s in samples} | {s.last_frame for s in samples}
+    pending = list(samples)
+    interpolates = any(s.weight for s in samples)
+    cloth = cloth_geometry(sim)
+    normals = ClothNormals(cloth)
     shapes = colliders(scene)
     # Locked, a stage too: it is written for as long as the simulation runs.
     with atomic_output(dest, directory=fmt == "obj", label=label, owned=obj.is_sequence_name, lock=True) as tmp:
         if fmt == "usd":
             writer: obj.ObjSequenceWriter | usd.UsdStageWriter = usd.UsdStageWriter(
-                tmp, label, faces, uvs, shapes, usd.stage_doc(Path(scene.path).name))
+                tmp, label, cloth, shapes, usd.stage_doc(Path(scene.path).name))
         else:
-            writer = obj.ObjSequenceWriter(tmp, sim.nw, sim.nh, uvs, faces, shapes)
+            writer = obj.ObjSequenceWriter(tmp, cloth, shapes)
+        before: tuple[np.ndarray, float] | None = None  # the last needed frame's state and time
 
-        def emit() -> None:
-            positions = sim.positions
-            writer.frame(sim.frame, positions.astype(np.float32), normals(positions), sim.time)
+        def emit(sample: Sample) -> None:
+            if sample.weight == 0.0:  # on a simulated frame: its state as it is
+                positions, seconds = sim.positions, sim.time
+            else:
+                assert before is not None
+                positions = blend(before[0], sim.positions, sample.weight)
+                seconds = before[1] + sample.weight * (sim.time - before[1])
+            writer.frame(sample.code, positions.astype(np.float32), normals(positions), seconds)
 
-        emit()
+        def reached() -> None:
+            nonlocal before
+            while pending and pending[0].last_frame == sim.frame:
+                emit(pending.pop(0))
+            if interpolates and sim.frame in needed:
+                before = (sim.positions.copy(), sim.time)
+
+        reached()
         with progress_bar(frames, "export", show=progress) as bar:
             for _ in range(frames):
                 sim.step()
                 bar.update()
-                if sim.frame in wanted:
-                    emit()
-        writer.finish(numbers[0], numbers[-1], float(scene.simulation.frames_per_sec))
+                reached()
+        writer.finish(numbers[0], numbers[-1], sim_fps if out_fps is None else float(out_fps))
     return numbers
 

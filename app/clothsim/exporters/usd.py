@@ -1,11 +1,15 @@
 """A USD stage (``.usd``, ``.usda``, ``.usdc``) through Pixar's ``usd-core`` (the ``usd`` extra).
 
-Layout of the stage (default prim ``/World``, Y up, 1 metre per unit, time code = frame number,
-``timeCodesPerSecond`` = ``framesPerSecond`` = the scene's frames_per_sec)::
+Layout of the stage (default prim ``/World``, Y up, 1 metre per unit, time code = exported
+frame number, ``timeCodesPerSecond`` = ``framesPerSecond`` = the export's frame rate: the scene's
+frames_per_sec unless resampled; ``startTimeCode``/``endTimeCode`` the first and last frame)::
 
     /World                    Xform
-    /World/cloth              Mesh: the grid's triangles, points/normals/extent time-sampled
-                              at every exported frame, primvars:st (per vertex)
+    /World/cloth              Mesh: the cloth's triangles over its points; points/normals/extent
+                              time-sampled at every exported frame (normals per point); primvars:st
+                              per point (``vertex``) where render vertices are the points, else
+                              ``faceVarying`` and indexed (values per render vertex, an index per
+                              triangle corner)
     /World/colliders/sphere_0 Sphere: radius, xformOp:translate, extent
     /World/colliders/plane_0  Mesh: one large quad
     /World/colliders/capsule_0, box_0, mesh_0   Mesh: triangles
@@ -25,7 +29,7 @@ import numpy as np
 
 from ..version import __version__
 from ..errors import ClothsimError
-from .geometry import Collider, MeshData
+from .geometry import ClothGeometry, Collider, MeshData
 
 SUFFIXES = (".usd", ".usda", ".usdc")
 INSTALL_HINT = "pip install 'clothsim[usd]'"
@@ -43,8 +47,7 @@ def import_pxr(label: str, suffix: str) -> Any:
 class UsdStageWriter:
     """Collects the frames on an in-memory stage and exports it to ``path`` in :meth:`finish`."""
 
-    def __init__(self, path: Path, label: str, faces: np.ndarray, uvs: np.ndarray, colliders: list[Collider],
-                 doc: str) -> None:
+    def __init__(self, path: Path, label: str, cloth: ClothGeometry, colliders: list[Collider], doc: str) -> None:
         self.path = Path(path)
         self.label = label
         self.Usd, self.UsdGeom, self.Sdf, self.Vt, self.Gf = import_pxr(label, self.path.suffix)
@@ -55,7 +58,10 @@ class UsdStageWriter:
         self.stage.SetDefaultPrim(world.GetPrim())
         UsdGeom.SetStageUpAxis(self.stage, UsdGeom.Tokens.y)
         UsdGeom.SetStageMetersPerUnit(self.stage, 1.0)
-        self.cloth = self._mesh("/World/cloth", faces, uvs)
+        if cloth.shared:
+            self.cloth = self._mesh("/World/cloth", cloth.faces, cloth.uvs)
+        else:
+            self.cloth = self._mesh("/World/cloth", cloth.faces, cloth.uvs, cloth.uv_faces)
         self.cloth.CreateDoubleSidedAttr(True)  # a cloth is seen from both sides
         self.cloth.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         if colliders:
@@ -65,16 +71,21 @@ class UsdStageWriter:
         for collider in colliders:
             self._collider(f"/World/colliders/{collider.name}", collider)
 
-    def _mesh(self, path: str, faces: np.ndarray, uvs: np.ndarray) -> Any:
+    def _mesh(self, path: str, faces: np.ndarray, uvs: np.ndarray, uv_faces: np.ndarray | None = None) -> Any:
+        """A Mesh of ``faces``; ``st`` per vertex, or with ``uv_faces`` (render vertices that are
+        not the points) face-varying, indexed: the values ``uvs`` and an index per corner."""
         UsdGeom, Sdf, Vt = self.UsdGeom, self.Sdf, self.Vt
         mesh = UsdGeom.Mesh.Define(self.stage, path)
         mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)  # polygons as they are, not a subdivision cage
         n, k = faces.shape
         mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(n, k, dtype=np.int32)))
         mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(faces.ravel(), dtype=np.int32)))
-        st = UsdGeom.PrimvarsAPI(mesh.GetPrim()).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
-                                                               UsdGeom.Tokens.vertex)
+        st = UsdGeom.PrimvarsAPI(mesh.GetPrim()).CreatePrimvar(
+            "st", Sdf.ValueTypeNames.TexCoord2fArray,
+            UsdGeom.Tokens.vertex if uv_faces is None else UsdGeom.Tokens.faceVarying)
         st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(uvs, dtype=np.float32)))
+        if uv_faces is not None:
+            st.SetIndices(Vt.IntArray.FromNumpy(np.ascontiguousarray(uv_faces.ravel(), dtype=np.int32)))
         return mesh
 
     def _collider(self, path: str, collider: Collider) -> None:

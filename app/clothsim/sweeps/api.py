@@ -214,6 +214,8 @@ def sweep(scene: Any, grid_or_samples: dict[str, Any], out: str | os.PathLike[st
         description = M.describe(definition, runs, fractions, split_seed, collider_ids(first) if views else [],
                                  (first.cloth.num_width_points, first.cloth.num_height_points))
         description["frames_per_second"] = first.simulation.frames_per_sec
+        if first.cloth.is_mesh:
+            ds.describe_mesh_cloth(description, first.cloth)
         data.meta = description
         sampled = samples is not None
         data.splits = {r.id: M.split_of(r.id, r.params, sampled, fractions, split_seed) for r in runs}
@@ -277,7 +279,8 @@ def _run_all(runs: list[P.Run], scenes: dict[str, Scene], settings: dict[str, An
                 else:
                     sc = scenes[run.id]
                     arrays = ds.run_arrays(result["positions"], result["nw"], result["nh"], result["pinned"], sc,
-                                           sample_frames(last, every), P.scene_json(sc))
+                                           sample_frames(last, every), P.scene_json(sc), result.get("surface"),
+                                           result.get("rest"))
                     fps = sc.simulation.frames_per_sec / every
                     record["path"] = data.write_run(run.id, arrays, result["video"], fps)
                     if result.get("views") is not None:

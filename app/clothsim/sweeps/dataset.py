@@ -336,26 +336,138 @@ def save_npz(file: Any, arrays: dict[str, np.ndarray], level: int = 1) -> None:
 
 
 def run_arrays(positions: np.ndarray, nw: int, nh: int, pinned: np.ndarray, scene: Any, frames: list[int],
-               scene_json: dict[str, Any]) -> dict[str, np.ndarray]:
-    """The members of a run file (``runs/<id>.npz``), MeshGraphNets' fields among them."""
-    from ..cloth import cloth_triangles, cloth_uvs  # not the renderer's module: no Numba here
+               scene_json: dict[str, Any], surface: Any = None, rest: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """The members of a run file (``runs/<id>.npz``), MeshGraphNets' fields among them.
+
+    A grid cloth's members are what they always were. A mesh cloth (``scene.cloth.is_mesh``)
+    writes the same members from its ``surface`` (:func:`clothsim.cloth.cloth_surface`, computed
+    here if not given): ``faces``/``cells`` its triangles, ``uv`` each point's texture
+    coordinates (those of its first render vertex), ``mesh_pos`` by :func:`mesh_positions` from
+    ``rest`` (the simulation's initial positions; else the mesh's points), and three more
+    members that keep its UV seams: ``uv_vertex``, ``uv_faces`` and ``uv_point``.
+    """
     from .meta import NODE_HANDLE, NODE_NORMAL
 
-    faces = cloth_triangles(nw, nh).astype(np.int32).reshape(-1, 3)
-    uv = np.asarray(cloth_uvs(nw, nh), dtype=np.float32)
     pinned = np.asarray(pinned, dtype=bool)
-    return {
+    common = {
         "positions": positions,
-        "faces": faces,
-        "uv": uv,
         "pinned": pinned,
         "scene": np.array(json.dumps(scene_json)),
         "frames": np.array(frames, dtype=np.int64),
-        # MeshGraphNets' names (world_pos is positions: meta.json says so)
-        "mesh_pos": uv * np.array([scene.cloth.width, scene.cloth.height], dtype=np.float32),
-        "node_type": np.where(pinned, NODE_HANDLE, NODE_NORMAL).astype(np.int32),
-        "cells": faces,
     }
+    node_type = np.where(pinned, NODE_HANDLE, NODE_NORMAL).astype(np.int32)
+    if not scene.cloth.is_mesh:
+        from ..cloth import cloth_triangles, cloth_uvs  # not the renderer's module: no Numba here
+
+        faces = cloth_triangles(nw, nh).astype(np.int32).reshape(-1, 3)
+        uv = np.asarray(cloth_uvs(nw, nh), dtype=np.float32)
+        return {
+            "positions": positions,
+            "faces": faces,
+            "uv": uv,
+            "pinned": pinned,
+            "scene": common["scene"],
+            "frames": common["frames"],
+            # MeshGraphNets' names (world_pos is positions: meta.json says so)
+            "mesh_pos": uv * np.array([scene.cloth.width, scene.cloth.height], dtype=np.float32),
+            "node_type": node_type,
+            "cells": faces,
+        }
+    if surface is None:
+        from ..cloth import cloth_surface
+
+        surface = cloth_surface(scene.cloth)
+    if rest is None:
+        rest = np.asarray(scene.cloth.mesh.points, dtype=np.float64)
+    faces = np.ascontiguousarray(surface.triangles, dtype=np.int32).reshape(-1, 3)
+    uv_point = np.asarray(surface.uv_point, dtype=np.int64)
+    uvs = np.asarray(surface.uvs, dtype=np.float32)
+    return {
+        **common,
+        "faces": faces,
+        "uv": uvs[first_vertex(uv_point, len(rest))],
+        "mesh_pos": mesh_positions(surface, rest),
+        "node_type": node_type,
+        "cells": faces,
+        "uv_vertex": uvs,
+        "uv_faces": np.ascontiguousarray(surface.uv_triangles, dtype=np.int32).reshape(-1, 3),
+        "uv_point": uv_point.astype(np.int32),
+    }
+
+
+def first_vertex(uv_point: np.ndarray, points: int) -> np.ndarray:
+    """(N,) the first render vertex of each point; one line if a point has none."""
+    found, first = np.unique(np.asarray(uv_point, dtype=np.int64), return_index=True)
+    if len(found) != points or (points and (found[0] != 0 or found[-1] != points - 1)):
+        raise ClothsimError(f"cloth surface: {points - len(found)} of {points} points have no render vertex")
+    return first
+
+
+def uv_scale(surface: Any, rest: np.ndarray) -> float:
+    """Metres per UV unit: the s minimising the sum over the surface's edges of
+    (s |uv_a - uv_b| - |x_a - x_b|)^2, edges taken once each over render vertices (a seam's two
+    sides are two edges) and x the rest positions of their points. 0 when every edge has zero UV length."""
+    tris = np.asarray(surface.uv_triangles, dtype=np.int64).reshape(-1, 3)
+    pairs = np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]])
+    pairs = np.unique(np.sort(pairs, axis=1), axis=0)
+    uvs = np.asarray(surface.uvs, dtype=np.float64)
+    point = np.asarray(surface.uv_point, dtype=np.int64)
+    x = np.asarray(rest, dtype=np.float64)
+    d = np.linalg.norm(uvs[pairs[:, 0]] - uvs[pairs[:, 1]], axis=1)
+    length = np.linalg.norm(x[point[pairs[:, 0]]] - x[point[pairs[:, 1]]], axis=1)
+    dd = float(np.dot(d, d))
+    return float(np.dot(d, length)) / dd if dd > 0.0 else 0.0
+
+
+def mesh_positions(surface: Any, rest: np.ndarray) -> np.ndarray:
+    """MeshGraphNets' ``mesh_pos`` of a mesh cloth: with UVs, (N, 2) float32, each point's UV
+    (its first render vertex) times :func:`uv_scale`; without UVs (``surface.has_uvs`` false, or
+    UVs of zero extent), (N, 3) float32, the rest positions."""
+    rest = np.asarray(rest, dtype=np.float64)
+    scale = uv_scale(surface, rest) if surface.has_uvs else 0.0
+    if scale <= 0.0:
+        return rest.astype(np.float32)
+    uv = np.asarray(surface.uvs, dtype=np.float64)[first_vertex(surface.uv_point, len(rest))]
+    return (uv * scale).astype(np.float32)
+
+
+def describe_mesh_cloth(meta: dict[str, Any], cloth: Any) -> None:
+    """Adapt ``meta.json``'s description (:func:`.meta.describe`, written for a grid) to a mesh
+    cloth: ``cloth`` instead of ``grid``, and the run file's fields as :func:`run_arrays` writes
+    them for a mesh."""
+    from ..cloth import cloth_surface
+
+    def _f(dtype: str, shape: str, units: str, doc: str) -> dict[str, Any]:  # meta.json's field entry
+        return {"dtype": dtype, "shape": shape, "units": units, "doc": doc}
+
+    surface = cloth_surface(cloth)
+    mesh = cloth.mesh
+    n, r, t = int(len(mesh.points)), int(len(surface.uvs)), int(len(surface.triangles))
+    meta.pop("grid", None)
+    source = getattr(mesh, "path", None) or getattr(mesh, "file", None)
+    meta["cloth"] = {"kind": "mesh", "file": None if source is None else os.path.basename(os.fspath(source)),
+                     "N": n, "render_vertices": r, "triangles": t, "has_uvs": bool(surface.has_uvs)}
+    fields = meta["run_file"]["fields"]
+    fields["positions"] = _f("float32", "(T, N, 3)", "m", "the cloth's points at the sampled frames, world space, "
+                             "y up; point i is the mesh's vertex i (after welding, as the simulation numbers them)")
+    fields["faces"] = _f("int32", "(F, 3)", "index", "the cloth's triangles over its points, counter-clockwise seen "
+                         f"from the front (the side the normal points to); F = {t}")
+    fields["cells"] = _f("int32", "(F, 3)", "index", "MeshGraphNets' name for faces (the same values)")
+    fields["uv"] = _f("float32", "(N, 2)", "1", "each point's texture coordinates: those of its first render "
+                      "vertex (uv_vertex[i] for the smallest i with uv_point[i] = the point)")
+    if surface.has_uvs:
+        fields["mesh_pos"] = _f("float32", "(N, 2)", "m", "MeshGraphNets' rest-state 2-D coordinates: uv times "
+                                "the one scale s (m per UV unit) minimising the sum over the mesh's edges (over "
+                                "render vertices, each once) of (s |uv_a - uv_b| - rest length)^2; rest lengths from "
+                                "the initial positions")
+    else:
+        fields["mesh_pos"] = _f("float32", "(N, 3)", "m", "MeshGraphNets' rest-state coordinates: the mesh has no "
+                                "UVs, so the initial (rest) positions")
+    fields["uv_vertex"] = _f("float32", "(R, 2)", "1", "texture coordinates per render vertex (a point on a UV seam "
+                             f"has one render vertex per side); R = {r}" + ("" if surface.has_uvs else
+                                                                            "; a planar projection: no UVs"))
+    fields["uv_faces"] = _f("int32", "(F, 3)", "index", "the same triangles as faces over render vertices")
+    fields["uv_point"] = _f("int32", "(R,)", "index", "the point of each render vertex (uv_point[uv_faces] == faces)")
 
 
 def _difference(theirs: dict[str, Any], ours: dict[str, Any]) -> str:

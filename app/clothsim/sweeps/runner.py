@@ -82,7 +82,8 @@ def _one_line(exc: BaseException) -> str:
 
 def run(task: Task) -> dict[str, Any]:
     """Simulate one run; returns ``status`` ``done`` or ``failed`` (with a one-line ``error``),
-    ``positions`` float32 (T, N, 3), ``pinned``, ``nw``/``nh``, ``cells`` {frame: image},
+    ``positions`` float32 (T, N, 3), ``pinned``, ``nw``/``nh`` (and for a mesh cloth ``surface``
+    and ``rest``, its initial positions), ``cells`` {frame: image},
     ``video`` (V, H, W, 3) uint8 or None, and ``seconds``."""
     start = time.perf_counter()
     result: dict[str, Any] = {"id": task.id, "status": "done", "error": None, "positions": None,
@@ -117,6 +118,9 @@ def _simulate(task: Task, result: dict[str, Any]) -> None:
     scene = task.scene
     sim = Simulation(scene)
     result.update(nw=sim.nw, nh=sim.nh, pinned=sim.pinned.copy())
+    if scene.cloth.is_mesh:
+        # What a mesh cloth's run file is made from (a grid's is its nw x nh).
+        result.update(surface=sim.surface, rest=np.array(sim.initial_positions, dtype=np.float64))
     wanted = sample_frames(task.frames, task.every) if (task.positions or task.video) else []
     wanted_set = set(wanted)
     cells = sorted(set(task.cells))
@@ -130,7 +134,7 @@ def _simulate(task: Task, result: dict[str, Any]) -> None:
         render_time += time.perf_counter() - t0
         return picture
 
-    samples = np.empty((len(wanted), sim.nw * sim.nh, 3), dtype=np.float32) if task.positions else None
+    samples = np.empty((len(wanted), sim.positions.shape[0], 3), dtype=np.float32) if task.positions else None
     # What the views need to redraw a sampled frame later: its time (moving colliders) and the
     # springs then (the wireframe draws the live ones).
     moments: list[tuple[float, Any]] = []
@@ -182,11 +186,12 @@ def _write(task: Task, result: dict[str, Any]) -> None:
 
     frames = sample_frames(task.frames, task.every)
     arrays = run_arrays(result["positions"], result["nw"], result["nh"], result["pinned"], task.scene, frames,
-                        scene_json(task.scene))
+                        scene_json(task.scene), result.get("surface"), result.get("rest"))
     files = encode_run(task.id, arrays, result["views"], frames, result["video"],
                        task.scene.simulation.frames_per_sec / task.every)
     write_files(task.write_to, files)
-    result.update(positions=None, views=None, video=None, pinned=None, written=f"runs/{task.id}.npz")
+    result.update(positions=None, views=None, video=None, pinned=None, surface=None, rest=None,
+                  written=f"runs/{task.id}.npz")
 
 
 @dataclass
@@ -200,6 +205,7 @@ class _Frame:
     springs: Any
     live_springs: Any
     time: float
+    surface: Any = None  # the cloth's Surface (a mesh cloth's triangles and UVs)
 
 
 def view_cameras(task: Task, samples: np.ndarray) -> list[Any]:
@@ -244,7 +250,8 @@ def draw_views(task: Task, sim: Any, samples: np.ndarray, moments: list[tuple[fl
         out["flow"] = np.empty((n_v, max(n_t - 1, 0), h, w, 2), dtype=np.float32)
     for t in range(n_t):
         now, live = moments[t]
-        frame = _Frame(sim.scene, sim.nw, sim.nh, samples[t].astype(np.float64), sim.springs, live, now)
+        frame = _Frame(sim.scene, sim.nw, sim.nh, samples[t].astype(np.float64), sim.springs, live, now,
+                       getattr(sim, "surface", None))
         following = samples[t + 1] if t + 1 < n_t else None
         for v, cam in enumerate(cams):
             if "rgb" in out:
