@@ -6,10 +6,13 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import statistics
+import tempfile
 import time
+from pathlib import Path
 
 from ..forces import FORCES
-from ..scene import bundled_scene_names, load_scene
+from ..scene import bundled_scene_names, load_scene, scene_from_dict
+from ..sweeps.params import scene_json
 from ..validate import check, integer
 
 
@@ -24,6 +27,33 @@ def median_ms_per_frame(step, frames: int, repeats: int) -> float:  # noqa: ANN0
     return statistics.median(samples)
 
 
+def grid_as_mesh(scene, folder: Path):  # noqa: ANN001, ANN201
+    """``scene`` with its grid cloth written out as an OBJ of quads (the grid's starting points,
+    exactly, and its UVs) and read back as a mesh cloth, with the same pins and parameters: a mesh
+    cloth of the grid's points and about as many springs (a 50 x 50 grid: 14,502 springs; the
+    mesh: 14,406)."""
+    from ..cloth import cloth_uvs, grid_positions
+
+    cloth = scene.cloth
+    nw, nh = cloth.num_width_points, cloth.num_height_points
+    pos = grid_positions(cloth, scene.simulation.seed)
+    uvs = cloth_uvs(nw, nh)
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in pos.tolist()]
+    lines += [f"vt {u!r} {v!r}" for u, v in uvs.astype(float).tolist()]
+    for y in range(nh - 1):
+        for x in range(nw - 1):
+            a = y * nw + x + 1
+            corners = (a, a + nw, a + nw + 1, a + 1)
+            lines.append("f " + " ".join(f"{c}/{c}" for c in corners))
+    path = folder / "grid.obj"
+    path.write_text("\n".join(lines) + "\n", encoding="ascii")
+    mesh_cloth = {"mesh": {"path": str(path)}, "thickness": cloth.thickness, "damping": cloth.damping,
+                  "density": cloth.density, "ks": cloth.ks, "pinned_vertices": [y * nw + x for x, y in cloth.pinned]}
+    data = dict(scene_json(scene))
+    data["cloth"] = mesh_cloth
+    return scene_from_dict(data, str(folder / "scene.json"))
+
+
 def add_parser(bench_sub: argparse._SubParsersAction) -> None:
     """Register ``clothsim bench speed``."""
     p = bench_sub.add_parser("speed", help="ms per frame of each bundled scene vs a NumPy baseline")
@@ -33,6 +63,9 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
                    help="frames simulated before timing, so the cloth is in motion (default 60)")
     p.add_argument("--baseline-frames", type=int, default=3, help="frames per repeat of the NumPy baseline")
     p.add_argument("--scenes", nargs="*", help="scene names or files (default: every bundled scene)")
+    p.add_argument("--as-mesh", action="store_true",
+                   help="also time each grid scene with its grid read as a mesh cloth (NAME as mesh: the grid's "
+                        "points as an OBJ of quads)")
     p.set_defaults(func=run)
 
 
@@ -56,6 +89,9 @@ def run(args: argparse.Namespace) -> int:
                 rows.append((f"{name} -{kind.key}", dataclasses.replace(scene, **{kind.attr: ()})))
         if scene.meshes:
             rows.append((f"{name} -mesh", dataclasses.replace(scene, meshes=())))
+        if args.as_mesh and not scene.cloth.is_mesh:
+            folder = Path(tempfile.mkdtemp(prefix="clothsim-bench-"))
+            rows.append((f"{name} as mesh", grid_as_mesh(scene, folder)))
     print(f"{'scene':<15}{'self-coll.':>11}{'ms/frame':>10}{'substeps/s':>12}{'x realtime':>11}"
           f"{'numpy ms':>10}{'speedup':>9}")
     for name, scene in rows:
@@ -69,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
             base = ""
             ratio = ""
             # the baseline knows only the course's static spheres and planes
-            if mode == "off" and not (scene.capsules or scene.boxes or scene.moving or sc.meshes):
+            if mode == "off" and not (scene.capsules or scene.boxes or scene.moving or sc.meshes or sc.cloth.is_mesh):
                 baseline = NumpyCloth(Simulation(sc))
                 baseline_ms = median_ms_per_frame(baseline.frame, args.baseline_frames, 3)
                 base = f"{baseline_ms:.1f}"
@@ -77,6 +113,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"{name:<15}{mode:>11}{ms:>10.3f}{steps * 1e3 / ms:>12.0f}{realtime:>10.1f}x{base:>10}{ratio:>9}",
                   flush=True)
     print("medians of repeats; numpy = vectorised NumPy baseline of the same step without self-collision "
-          "(and without wind; none for scenes with capsules, boxes, meshes or moving colliders); NAME -wind: the "
-          "scene above in still air; NAME -mesh: without its meshes")
+          "(and without wind; none for scenes with capsules, boxes, meshes, moving colliders or a mesh cloth); NAME -wind: the "
+          "scene above in still air; NAME -mesh: without its meshes; NAME as mesh: its grid read as a mesh cloth")
     return 0

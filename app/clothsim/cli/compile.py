@@ -44,6 +44,27 @@ def _tiny_scene(self_collision: str, colliders: bool, integrator: str = "verlet"
     return scene_from_dict(data, "<compile>")
 
 
+def _tiny_mesh_scene(self_collision: str, colliders: bool = False, integrator: str = "verlet",
+                     damping_mode: str = "spec", wind: bool = False):
+    """A tiny cloth read from an OBJ (the bundled skirt's): a mesh cloth's plans."""
+    from ..resources import data_dir
+    from ..scene import scene_from_dict
+
+    data: dict[str, Any] = {
+        "cloth": {"mesh": {"path": str(data_dir("scenes") / "skirt.obj")}, "thickness": 0.01, "damping": 0.2,
+                  "density": 150, "ks": 5000, "pinned_vertices": [0]},
+        "simulation": {"self_collision": self_collision, "integrator": integrator, "damping_mode": damping_mode,
+                       "simulation_steps": 2},
+    }
+    if colliders:
+        data["sphere"] = {"origin": [0.0, -0.5, 0.0], "radius": 0.2, "friction": 0.3}
+        data["plane"] = {"point": [0, -1, 0], "normal": [0, 1, 0], "friction": 0.5}
+    if wind:
+        data["wind"] = {"velocity": [1, 0, 0], "turbulence": 1}
+        data["cloth"]["pin_motion"] = {"velocity": [0, 0.1, 0]}
+    return scene_from_dict(data, "<compile>")
+
+
 def _turning_scene():
     """A tiny scene whose colliders of every kind turn: the turning groups' kernels (a plan that
     holds them is compiled from these, whichever other kinds it has)."""
@@ -70,7 +91,7 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
     """Everything ``clothsim compile`` compiles: each frame-kernel plan (self-collision mode x
     colliders; wind and moving pins with the spec's self-collision, as the bundled ``flag`` uses),
     the plans of the bundled capsule, box, moving-collider and mesh scenes, colliders of every kind
-    turning, the contact mode's plan
+    turning, a cloth read from an OBJ (each self-collision mode and integrator), the contact mode's plan
     with colliders, each other integrator, the rest detector and the renderer's mesh kernel."""
     from ..sim import Simulation
 
@@ -89,6 +110,15 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
     items += [(f"frame kernel: bundled scene {name}", step(load_scene(name))) for name in ("tablecloth", "curtain",
                                                                                           "capsule")]
     items.append(("colliders of every kind turning", step(_turning_scene())))
+    # a cloth read from an OBJ: its own plans (the cloth's group has its springs' lists)
+    items += [("mesh cloth: bundled scene skirt", step(load_scene("skirt"))),
+              ("mesh cloth: self-collision contact, colliders", step(_tiny_mesh_scene("contact", True)))]
+    items += [(f"mesh cloth: self-collision {mode}", step(_tiny_mesh_scene(mode))) for mode in ("contact", "spec",
+                                                                                                "grid", "off")]
+    items += [(f"mesh cloth: integrator {name}/{damping}", step(_tiny_mesh_scene("off", False, name, damping)))
+              for name, damping in (("verlet", "rate"), ("symplectic_euler", "spec"), ("implicit_euler", "spec"),
+                                    ("xpbd", "spec"))]
+    items.append(("mesh cloth: wind and moving pins", step(_tiny_mesh_scene("spec", wind=True))))
     items += [(f"frame kernel: self-collision {mode}, {'colliders' if col else 'no colliders'}",
                step(_tiny_scene(mode, col))) for mode in ("spec", "off", "grid") for col in (True, False)]
     items += [("frame kernel: self-collision spec, wind", step(_tiny_scene("spec", False, wind=True))),
@@ -109,6 +139,7 @@ def side_kernels() -> None:
 
     overlap.register_warm()  # the renderer registers these for the scenes and looks that use them only
     seen.register_warm()
+    mesh.register_surface_warm()  # a mesh cloth's
 
     warm_side_kernels()
 
