@@ -1,7 +1,10 @@
-"""Shapes the project makes itself, written as OBJ text: the bundled ``mesh`` scene's torus, and a box.
+"""Shapes the project makes itself, written as OBJ text: the bundled ``mesh`` scene's torus, a box,
+a sphere, and a sphere that breathes (a sequence of frames).
 
 ``python -m clothsim.objshapes`` rewrites ``scenes/torus.obj`` (the file shipped with the ``mesh``
-scene); the test suite checks that the shipped file is exactly what this module writes.
+scene) and ``python -m clothsim.objshapes breathing`` the frames of the ``breathing`` scene
+(``scenes/breathing/breath_##.obj``); the test suite checks that the shipped files are exactly
+what this module writes.
 """
 
 from __future__ import annotations
@@ -50,9 +53,65 @@ def box_obj(hx: float = 0.5, hy: float = 0.5, hz: float = 0.5, *, drop_top: bool
                 verts, faces)
 
 
+#: The bundled breathing body: rest radius, how far the radius swings either way, frames in one
+#: breath (the sequence loops), rings and segments of the sphere.
+BREATHING = (0.22, 0.05, 24, 12, 24)
+
+
+def sphere_obj(radius: float, rings: int, segments: int, *, squash: float = 1.0) -> str:
+    """A closed UV sphere centred at the origin, wound outwards: a vertex at each pole, ``rings``
+    - 1 rings of ``segments`` vertices between them; ``squash`` scales its height (y)."""
+    verts = [(0.0, -radius * squash, 0.0)]
+    for i in range(1, rings):
+        a = math.pi * i / rings - 0.5 * math.pi
+        for j in range(segments):
+            b = 2.0 * math.pi * j / segments
+            verts.append((radius * math.cos(a) * math.cos(b), radius * math.sin(a) * squash,
+                          radius * math.cos(a) * math.sin(b)))
+    verts.append((0.0, radius * squash, 0.0))
+    top = len(verts) - 1
+
+    def ring(i: int, j: int) -> int:
+        return 1 + (i - 1) * segments + j % segments
+
+    faces: list[tuple[int, ...]] = [(0, ring(1, j), ring(1, j + 1)) for j in range(segments)]
+    for i in range(1, rings - 1):
+        faces += [(ring(i, j), ring(i + 1, j), ring(i + 1, j + 1), ring(i, j + 1)) for j in range(segments)]
+    faces += [(ring(rings - 1, j), top, ring(rings - 1, j + 1)) for j in range(segments)]
+    return _obj(f"sphere: radius {radius:g}, height x {squash:g}, {rings} rings x {segments} segments "
+                f"(clothsim.objshapes)", verts, faces)
+
+
+def breathing_frames(radius: float, swing: float, frames: int, rings: int, segments: int) -> list[str]:
+    """One breath of a body: ``frames`` spheres whose radius goes ``radius`` + ``swing`` sin(2 pi k /
+    frames) and whose height swells a little more than their width, the same faces in every frame."""
+    out = []
+    for k in range(frames):
+        phase = math.sin(2.0 * math.pi * k / frames)
+        out.append(sphere_obj(radius + swing * phase, rings, segments, squash=1.0 + 0.15 * phase))
+    return out
+
+
+def write_breathing(folder: Path) -> list[Path]:
+    """The breathing scene's frames, ``breath_00.obj`` ..., into ``folder`` (made if missing)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for k, text in enumerate(breathing_frames(*BREATHING)):
+        path = folder / f"breath_{k:02d}.obj"
+        path.write_text(text, encoding="ascii")
+        paths.append(path)
+    return paths
+
+
 def main(argv: list[str]) -> int:
-    """Write the bundled torus to ``argv[0]`` (default: scenes/torus.obj of this checkout)."""
-    out = Path(argv[0]) if argv else Path(__file__).resolve().parents[2] / "scenes" / "torus.obj"
+    """Write the bundled torus to ``argv[0]`` (default: scenes/torus.obj of this checkout), or with
+    ``breathing [FOLDER]`` the breathing scene's frames (default: scenes/breathing/)."""
+    scenes = Path(__file__).resolve().parents[2] / "scenes"
+    if argv[:1] == ["breathing"]:
+        paths = write_breathing(Path(argv[1]) if len(argv) > 1 else scenes / "breathing")
+        print(f"wrote {len(paths)} frames into {paths[0].parent}")
+        return 0
+    out = Path(argv[0]) if argv else scenes / "torus.obj"
     out.write_text(torus_obj(*TORUS), encoding="ascii")
     print(f"wrote {out}")
     return 0

@@ -1,0 +1,132 @@
+"""A deforming mesh collider's frames: a numbered series of OBJ files, and its shape at any time.
+
+A ``sequence`` pattern such as ``walk_####.obj`` names frame n by writing n, zero-padded to the
+width of each run of ``#``, in place of the run (a number wider than its run is written whole).
+The frames are numbered from the first file that exists, frame 0 or else frame 1, and run on while
+the next number's file exists: the first missing number ends the sequence. Every frame must have
+the first frame's faces (the same vertex indices, face by face, after polygons are split into
+triangles) and as many vertices; only the vertices' positions change.
+
+Time: frame k (counted from the first, whatever its number) is the shape at time k / fps; between
+two frames each vertex moves on the straight line between them; after the last frame the shape
+holds it, or with ``loop`` it goes back to the first frame over one more frame's time and repeats
+(a period of F / fps for F frames). :meth:`MeshFrames.at` is the rule, and
+:mod:`clothsim.sim.passes.colliders.meshgrid` evaluates the same expression in the kernels.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from .objfile import ObjError, read_obj
+
+#: Most frames one sequence may hold (each is a whole OBJ read and kept in memory).
+MAX_FRAMES = 10_000
+#: Highest frame rate accepted (frames a second): a frame per course substep is 2700.
+MAX_FPS = 1e5
+_RUN = re.compile(r"#+")
+
+
+@dataclass(frozen=True, eq=False)
+class MeshFrames:
+    """A read sequence: ``frames`` (F, V, 3) float64 as in the files, the first frame's
+    ``triangles`` (T, 3) int64 and their faces' ``lines``, the ``files`` read, the number of the
+    first, the rate ``fps`` and whether it ``loop``s."""
+
+    pattern: str
+    files: tuple[str, ...]
+    first: int
+    frames: np.ndarray
+    triangles: np.ndarray
+    lines: np.ndarray
+    fps: float
+    loop: bool
+
+    def at(self, frames: np.ndarray, t: float) -> np.ndarray:
+        """The shape at time ``t`` from ``frames`` (F, V, 3): these frames, or the same placed
+        (scaled and rotated, which commutes with the interpolation up to rounding)."""
+        i, j, f = frame_pair(t, self.fps, frames.shape[0], self.loop)
+        a = frames[i]
+        return a + (frames[j] - a) * f
+
+
+def frame_pair(t: float, fps: float, count: int, loop: bool) -> tuple[int, int, float]:
+    """(frame i, frame j, weight f): the shape at ``t`` is frame i + (frame j - frame i) f. The
+    kernels' own copy of this rule is :func:`clothsim.sim.passes.colliders.meshgrid.frame_pair`."""
+    x = t * fps
+    if not x > 0.0:
+        return 0, 0, 0.0
+    k = math.floor(x)
+    f = x - k
+    if loop:
+        i = int(k % count)
+        return i, (i + 1) % count, f
+    if k >= count - 1:
+        return count - 1, count - 1, 0.0
+    return int(k), int(k) + 1, f
+
+
+def frame_name(pattern: str, number: int) -> str:
+    """The file of frame ``number``: each run of ``#`` replaced by the number, zero-padded to it."""
+    return _RUN.sub(lambda run: f"{number:0{len(run.group())}d}", pattern)
+
+
+def read_sequence(pattern: str, fps: float, loop: bool) -> MeshFrames:
+    """Every frame of ``pattern`` read and checked against the first; raises ``ValueError`` with
+    one line naming the file (and the face's line) that is wrong."""
+    if "#" not in os.path.basename(pattern):
+        raise ValueError(f"{pattern}: the pattern has no '#' in its file name (each run of '#' is the "
+                         f"frame number, zero-padded: e.g. walk_####.obj)")
+    if not fps > 0.0:
+        raise ValueError(f"fps must be > 0, got {fps:g}")
+    first = next((n for n in (0, 1) if os.path.isfile(frame_name(pattern, n))), None)
+    if first is None:
+        raise ValueError(f"no first frame: neither {frame_name(pattern, 0)} nor {frame_name(pattern, 1)} is a file")
+    files: list[str] = []
+    shapes: list[np.ndarray] = []
+    triangles = lines = None
+    number = first
+    while os.path.isfile(frame_name(pattern, number)):
+        name = frame_name(pattern, number)
+        if len(files) == MAX_FRAMES:
+            raise ValueError(f"{name}: more than {MAX_FRAMES} frames")
+        try:
+            obj = read_obj(name)
+        except ObjError as exc:
+            raise ValueError(f"{name}: {exc}") from None
+        except OSError as exc:
+            raise ValueError(f"{name}: cannot read OBJ file: {exc.strerror or exc}") from None
+        if triangles is None:
+            triangles, lines = obj.triangles, obj.lines
+        else:
+            _same_faces(name, files[0], obj, triangles, lines, shapes[0].shape[0])
+        files.append(name)
+        shapes.append(obj.vertices)
+        number += 1
+    assert triangles is not None and lines is not None
+    return MeshFrames(pattern, tuple(files), first, np.ascontiguousarray(np.stack(shapes)), triangles, lines,
+                      float(fps), bool(loop))
+
+
+def _same_faces(name: str, first_name: str, obj: object, triangles: np.ndarray, lines: np.ndarray,
+                vertices: int) -> None:
+    tris = obj.triangles  # type: ignore[attr-defined]
+    here = obj.lines  # type: ignore[attr-defined]
+    n = min(tris.shape[0], triangles.shape[0])
+    differ = np.flatnonzero((tris[:n] != triangles[:n]).any(axis=1))
+    if differ.size:
+        i = int(differ[0])
+        raise ValueError(f"{name}: line {int(here[i])}: face differs from the first frame's ({first_name} line "
+                         f"{int(lines[i])}); every frame needs the first frame's faces")
+    if tris.shape[0] != triangles.shape[0]:
+        line = int(here[n]) if tris.shape[0] > n else int(here[-1])
+        raise ValueError(f"{name}: line {line}: {tris.shape[0]} triangles, the first frame ({first_name}) has "
+                         f"{triangles.shape[0]}; every frame needs the first frame's faces")
+    if obj.vertices.shape[0] != vertices:  # type: ignore[attr-defined]
+        raise ValueError(f"{name}: {obj.vertices.shape[0]} vertices, the first frame ({first_name}) has "  # type: ignore[attr-defined]
+                         f"{vertices}; every frame needs as many")
