@@ -105,6 +105,30 @@ def test_a_growing_sphere_pushes_the_cloth_resting_on_it_outwards(tmp_path):
     assert dist.mean() > landed + 0.035 and dist.min() > 0.3, (landed, dist.mean(), dist.min())
 
 
+def sliding_sheet(folder: Path, frames: int = 6) -> str:
+    """Frames of an open 2 m square sheet (4 x 4 quads, y = 0) whose vertices move 0.1 m along +x a
+    frame: a surface moving within itself, which only friction can see."""
+    for k in range(frames):
+        verts = [f"v {-1 + 0.5 * i + 0.1 * k:.6f} 0 {-1 + 0.5 * j:.6f}" for j in range(5) for i in range(5)]
+        faces = [f"f {j * 5 + i + 1} {(j + 1) * 5 + i + 1} {(j + 1) * 5 + i + 2} {j * 5 + i + 2}"
+                 for j in range(4) for i in range(4)]
+        (folder / f"s_{k}.obj").write_text("\n".join(verts + faces) + "\n")
+    return str(folder / "s_#.obj")
+
+
+@pytest.mark.parametrize("friction, carried", [(1.0, 0.1), (0.0, 0.0)])
+def test_friction_acts_on_the_motion_relative_to_the_deforming_surface(tmp_path, friction, carried):
+    # the sheet's surface slides along +x at 0.2 m/s (2 frames a second) under a resting cloth
+    keys = {"sequence": sliding_sheet(tmp_path), "fps": 2, "translate": [0.3, 0.8, 0.3], "friction": friction}
+    sim = Simulation(scene(**keys))
+    sim.step(45)  # landed by 0.5 s
+    before = sim.positions.mean(axis=0)
+    sim.step(45)  # half a second more
+    after = sim.positions.mean(axis=0)
+    assert abs(after[0] - before[0] - carried) < 0.01, (before, after)
+    assert abs(after[1] - 0.81) < 2e-3  # resting on it, the thickness above
+
+
 # -- the bundled scene --------------------------------------------------------------------------
 
 def test_the_bundled_breathing_frames_are_what_the_generator_writes(tmp_path):
@@ -115,6 +139,17 @@ def test_the_bundled_breathing_frames_are_what_the_generator_writes(tmp_path):
     assert len(breathing_frames(0.2, 0.05, 4, 6, 8)) == 4
     spec = load_scene("breathing").meshes[0]
     assert spec.sequence.loop and spec.closed
+
+
+def test_a_sequence_round_trips_through_scene_json(tmp_path):
+    from clothsim.colliders import KINDS
+
+    spec = scene(**mesh(growing(tmp_path, frames=3), loop=True, scale=1.5)).meshes[0]
+    data = next(k for k in KINDS if k.key == "mesh").to_json(spec)
+    assert data["sequence"] == str(tmp_path / "g_###.obj") and data["fps"] == 10 and data["loop"] is True
+    again = scene(**data).meshes[0]
+    assert again.sequence.files == spec.sequence.files and again.scale == 1.5
+    assert np.array_equal(again.local_frames(), spec.local_frames())
 
 
 # -- bad input ----------------------------------------------------------------------------------

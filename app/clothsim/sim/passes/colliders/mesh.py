@@ -67,6 +67,12 @@ tests decide instead for a point without a list, a point with a reachable triang
 first ``NEAR_PLANES``, a last or corrected position not strictly outside a reachable triangle's
 plane, and a closed mesh's list measured from inside it (no planes then).
 
+A deforming mesh (:mod:`.meshdeform`) takes :func:`collide_deforming_points` instead: no lists and
+no planes (they assume still triangles), the grid every substep, each point's reach widened by
+how far the mesh's vertices move over the substep, and each triangle tested with the point's last
+position carried by that triangle's own motion (:func:`_moving_tri_test`), so that the crossing
+test and friction see the point's motion relative to the surface.
+
 In the tests, ties between triangles are broken by the lower triangle index, so their answer does
 not depend on the order triangles come in, and equals the brute-force one (:func:`mesh_targets`)
 bit for bit. Each point's list is written only by the work item that owns the point.
