@@ -87,6 +87,7 @@ from typing import Any
 import numba
 import numpy as np
 from numba import njit, types
+from numba.extending import overload
 
 from ....jit import BORROWED, CHUNKS, EXACT, KERNEL
 from ....jit.internals import call_native, native_address
@@ -746,17 +747,31 @@ def collide_meshes_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, me
     part = free[f0:f1]
     for m in range(mesh.dims.shape[0]):
         if on[m]:
-            _collide_one(pos, last, part, mesh, m, mesh.deform)
+            collide_one(pos, last, part, mesh, m, mesh.deform)
 
 
-@njit(**BORROWED)
-def _collide_one(pos: np.ndarray, last: np.ndarray, part: np.ndarray, mesh: tuple, m: int, d: Deform | None) -> None:
-    # a function of its own, so that without a deforming mesh (d None) the branch is gone when compiled
-    if d is not None:
+def collide_one(pos: np.ndarray, last: np.ndarray, part: np.ndarray, mesh: tuple, m: int, d: Deform | None) -> None:
+    """The points ``part`` against mesh ``m`` at its pose: :func:`collide_deforming_points` for a
+    deforming mesh, else :func:`collide_mesh_points` (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(collide_one, inline="always", jit_options=BORROWED)
+def _collide_one(pos, last, part, mesh, m, d):  # noqa: ANN001, ANN202
+    # inlined, and without a deforming mesh (d None) only the fixed meshes' pass: the code it had
+    if isinstance(d, types.NoneType):
+        def fixed(pos, last, part, mesh, m, d):  # noqa: ANN001, ANN202
+            collide_mesh_points(pos, last, part, mesh, m, mesh.pose[m, :3], mesh.pose[m, 3:], mesh.turns, False)
+
+        return fixed
+
+    def impl(pos, last, part, mesh, m, d):  # noqa: ANN001, ANN202
         if d.which[m] >= 0:
             collide_deforming_points(pos, last, part, mesh, m, mesh.pose[m, :3], mesh.pose[m, 3:], mesh.turns, d)
-            return
-    collide_mesh_points(pos, last, part, mesh, m, mesh.pose[m, :3], mesh.pose[m, 3:], mesh.turns, False)
+        else:
+            collide_mesh_points(pos, last, part, mesh, m, mesh.pose[m, :3], mesh.pose[m, 3:], mesh.turns, False)
+
+    return impl
 
 
 @njit(**EXACT)
@@ -810,16 +825,26 @@ def pose_meshes(tr: Tracks | None, tu: Turns | None, pose: np.ndarray, substep: 
 def pose(g: MeshGroup, substep: int) -> None:
     """Put the moving meshes at their pose for substep ``substep``, and the deforming ones' vertices."""
     pose_meshes(g.tracks, g.turns, g.pose, substep)
-    _deform(g.deform, g, substep)
+    deform_pose(g.deform, g, substep)
 
 
-@njit(**KERNEL)
-def _deform(d: Deform | None, g: MeshGroup, substep: int) -> None:
-    # apart, so that a group without a deforming mesh (d None) compiles nothing of it
-    if d is None:
-        return
-    deform_meshes(d, g.verts, g.tris, g.tbox, g.fnorm, g.enorm, g.vnorm, g.cell_tris, g.cell_box, g.tracks.clock,
-                  g.tracks.dt, substep)
+def deform_pose(d: Deform | None, g: MeshGroup, substep: int) -> None:
+    """The deforming meshes' vertices, normals and boxes for substep ``substep``
+    (:func:`~.meshdeform.deform_meshes`); nothing, and no code, when ``d`` is None (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(deform_pose, inline="always", jit_options=KERNEL)
+def _deform_pose(d, g, substep):  # noqa: ANN001, ANN202
+    # inlined, so that a group without a deforming mesh compiles no function for it
+    if isinstance(d, types.NoneType):
+        return lambda d, g, substep: None
+
+    def impl(d, g, substep):  # noqa: ANN001, ANN202
+        deform_meshes(d, g.verts, g.tris, g.tbox, g.fnorm, g.enorm, g.vnorm, g.cell_tris, g.cell_box, g.tracks.clock,
+                      g.tracks.dt, substep)
+
+    return impl
 
 
 @njit(**EXACT)
