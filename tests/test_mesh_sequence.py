@@ -152,6 +152,42 @@ def test_a_sequence_round_trips_through_scene_json(tmp_path):
     assert np.array_equal(again.local_frames(), spec.local_frames())
 
 
+def _usd_stage(path: Path, radii: list[float]) -> None:
+    """A stage with one mesh whose points are time-sampled: a sphere of each radius in turn."""
+    from pxr import Usd, UsdGeom
+
+    from clothsim.objfile import parse_obj
+
+    stage = Usd.Stage.CreateNew(str(path))
+    mesh = UsdGeom.Mesh.Define(stage, "/body")
+    shapes = [parse_obj(sphere_obj(r, 8, 12)) for r in radii]
+    mesh.GetFaceVertexCountsAttr().Set([3] * shapes[0].triangles.shape[0])
+    mesh.GetFaceVertexIndicesAttr().Set(shapes[0].triangles.reshape(-1).tolist())
+    for k, shape in enumerate(shapes):
+        mesh.GetPointsAttr().Set([tuple(p) for p in shape.vertices.tolist()], 10.0 * k)
+    stage.GetRootLayer().Save()
+
+
+def test_a_usd_meshs_time_samples_are_the_frames(tmp_path):
+    pytest.importorskip("pxr")
+    _usd_stage(tmp_path / "grow.usda", [0.2, 0.25, 0.3])
+    spec = scene(**mesh(str(tmp_path / "grow.usda"))).meshes[0]
+    assert spec.sequence.frames.shape[0] == 3 and spec.closed
+    radius = np.linalg.norm(spec.local_vertices_at(0.05), axis=1)
+    assert np.allclose(radius, 0.225)  # half way between the first two samples (10 fps)
+
+
+def test_a_usd_sequence_without_usd_core_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    from clothsim.errors import ClothsimError
+
+    monkeypatch.setitem(sys.modules, "pxr", None)
+    (tmp_path / "a.usda").write_text("#usda 1.0\n")
+    with pytest.raises(ClothsimError, match=r"needs the 'usd' extra \(pip install 'clothsim\[usd\]'\)"):
+        scene(**mesh(str(tmp_path / "a.usda")))
+
+
 # -- bad input ----------------------------------------------------------------------------------
 
 def _fails(tmp_path: Path, keys: dict) -> list[str]:

@@ -38,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from . import validate as V
-from .meshsequence import MAX_FPS, MeshFrames, read_sequence
+from .meshsequence import MAX_FPS, USD_SUFFIXES, MeshFrames, read_sequence
 from .motion import COLLIDER_MOTION, MotionSpec, Track
 from .objfile import ObjError, read_obj
 
@@ -308,6 +308,8 @@ def _sequence_mesh(fields: dict[str, Any], at: V.At) -> MeshSpec:
         for name, shape in zip(frames.files[1:], frames.frames[1:]):
             check_topology(shape, frames.triangles, frames.lines, areas_only=True)
     except ObjError as exc:
+        if frames.files[0].lower().endswith(USD_SUFFIXES):  # a stage's faces are numbered, not lines
+            raise here.fail(f"{name}: face {exc.line}: {exc.problem}") from None
         raise here.fail(f"{name}: {exc}") from None
     spec = MeshSpec(path=pattern, file=str(base), scale=fields["scale"], translate=fields["translate"],
                     rotation=fields["rotation"], friction=fields["friction"], motion=fields["motion"],

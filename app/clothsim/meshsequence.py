@@ -7,6 +7,12 @@ the next number's file exists: the first missing number ends the sequence. Every
 the first frame's faces (the same vertex indices, face by face, after polygons are split into
 triangles) and as many vertices; only the vertices' positions change.
 
+With the ``usd`` extra (usd-core), a sequence may instead name one USD stage (``.usd``, ``.usda``,
+``.usdc``, no ``#``): its first mesh prim (``UsdGeom.Mesh``, in stage order) is read, and each
+time sample of its ``points`` is a frame, in time order (their time codes are not used: ``fps``
+sets the rate, as for OBJ frames); its faces must not be time-sampled. Messages name the stage and
+the face's number (1-based) instead of a line.
+
 Time: frame k (counted from the first, whatever its number) is the shape at time k / fps; between
 two frames each vertex moves on the straight line between them; after the last frame the shape
 holds it, or with ``loop`` it goes back to the first frame over one more frame's time and repeats
@@ -76,9 +82,15 @@ def frame_name(pattern: str, number: int) -> str:
     return _RUN.sub(lambda run: f"{number:0{len(run.group())}d}", pattern)
 
 
+#: A stage's suffixes (a USD source instead of numbered OBJ files).
+USD_SUFFIXES = (".usd", ".usda", ".usdc")
+
+
 def read_sequence(pattern: str, fps: float, loop: bool) -> MeshFrames:
     """Every frame of ``pattern`` read and checked against the first; raises ``ValueError`` with
     one line naming the file (and the face's line) that is wrong."""
+    if "#" not in os.path.basename(pattern) and pattern.lower().endswith(USD_SUFFIXES):
+        return read_usd(pattern, fps, loop)
     if "#" not in os.path.basename(pattern):
         raise ValueError(f"{pattern}: the pattern has no '#' in its file name (each run of '#' is the "
                          f"frame number, zero-padded: e.g. walk_####.obj)")
@@ -130,3 +142,54 @@ def _same_faces(name: str, first_name: str, obj: object, triangles: np.ndarray, 
     if obj.vertices.shape[0] != vertices:  # type: ignore[attr-defined]
         raise ValueError(f"{name}: {obj.vertices.shape[0]} vertices, the first frame ({first_name}) has "  # type: ignore[attr-defined]
                          f"{vertices}; every frame needs as many")
+
+
+def read_usd(path: str, fps: float, loop: bool) -> MeshFrames:
+    """The frames of a USD stage's first mesh (see the module's docstring); ``ValueError`` naming
+    the stage (and the extra, when usd-core is missing)."""
+    try:
+        from pxr import Usd, UsdGeom
+    except ImportError:
+        raise ValueError(f"{path}: reading a USD stage needs the 'usd' extra (pip install 'clothsim[usd]')") from None
+    if not os.path.isfile(path):
+        raise ValueError(f"{path}: no such USD stage")
+    try:
+        stage = Usd.Stage.Open(path)
+    except Exception as exc:  # noqa: BLE001 - usd-core raises its own Tf.ErrorException
+        raise ValueError(f"{path}: cannot open USD stage: {str(exc).strip().splitlines()[-1][:200]}") from None
+    prim = next((p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)), None)
+    if prim is None:
+        raise ValueError(f"{path}: no mesh (UsdGeom.Mesh) in the stage")
+    mesh = UsdGeom.Mesh(prim)
+    where = f"{path}: {prim.GetPath()}"
+    if mesh.GetFaceVertexIndicesAttr().GetNumTimeSamples() > 0 or mesh.GetFaceVertexCountsAttr().GetNumTimeSamples() > 0:
+        raise ValueError(f"{where}: faceVertexIndices or faceVertexCounts has time samples; every frame needs the "
+                         f"same faces")
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
+    points = mesh.GetPointsAttr()
+    times = points.GetTimeSamples()
+    shapes = [np.asarray(points.Get(t), dtype=np.float64).reshape(-1, 3) for t in times] or \
+        [np.asarray(points.Get() or [], dtype=np.float64).reshape(-1, 3)]
+    if counts.size == 0 or counts.sum() != indices.size or (counts < 3).any():
+        raise ValueError(f"{where}: faceVertexCounts and faceVertexIndices do not describe faces of 3 or more corners")
+    n = shapes[0].shape[0]
+    if indices.min() < 0 or indices.max() >= n:
+        raise ValueError(f"{where}: a face index is out of range (0..{n - 1})")
+    for k, shape in enumerate(shapes):
+        if shape.shape[0] != n:
+            raise ValueError(f"{where}: time sample {times[k]:g} has {shape.shape[0]} points, the first has {n}")
+        if not np.isfinite(shape).all():
+            raise ValueError(f"{where}: time sample {times[k]:g} has a non-finite point")
+    starts = np.cumsum(counts) - counts
+    # each polygon split into a fan from its first corner, as the OBJ reader does
+    face = np.repeat(np.arange(counts.size), counts - 2)
+    k = np.arange(face.size) - np.repeat(np.cumsum(counts - 2) - (counts - 2), counts - 2)
+    tris = np.stack([indices[starts[face]], indices[starts[face] + k + 1], indices[starts[face] + k + 2]], axis=1)
+    twice = np.flatnonzero((tris[:, 0] == tris[:, 1]) | (tris[:, 1] == tris[:, 2]) | (tris[:, 0] == tris[:, 2]))
+    if twice.size:
+        raise ValueError(f"{where}: face {int(face[twice[0]]) + 1} uses the same point twice")
+    if len(shapes) > MAX_FRAMES:
+        raise ValueError(f"{where}: more than {MAX_FRAMES} time samples")
+    return MeshFrames(path, (path,) * len(shapes), 0, np.ascontiguousarray(np.stack(shapes)),
+                      np.ascontiguousarray(tris), face + 1, float(fps), bool(loop))
