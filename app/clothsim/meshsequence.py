@@ -17,7 +17,7 @@ Time: frame k (counted from the first, whatever its number) is the shape at time
 two frames each vertex moves on the straight line between them; after the last frame the shape
 holds it, or with ``loop`` it goes back to the first frame over one more frame's time and repeats
 (a period of F / fps for F frames). :meth:`MeshFrames.at` is the rule, and
-:mod:`clothsim.sim.passes.colliders.meshdeform` evaluates the same expression in the kernels.
+:mod:`clothsim.sim.passes.colliders.meshdeform` compiles the same function for the kernels.
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ class MeshFrames:
 
 def frame_pair(t: float, fps: float, count: int, loop: bool) -> tuple[int, int, float]:
     """(frame i, frame j, weight f): the shape at ``t`` is frame i + (frame j - frame i) f. The
-    kernels' own copy of this rule is :func:`clothsim.sim.passes.colliders.meshdeform.frame_pair`."""
+    kernels compile this function itself (:func:`clothsim.sim.passes.colliders.meshdeform.frame_pair`)."""
     x = t * fps
     if not x > 0.0:
         return 0, 0, 0.0

@@ -632,7 +632,8 @@ def _moving_tri_test(verts: np.ndarray, verts0: np.ndarray, tris: np.ndarray, fn
     cx, cy, cz = verts[c, 0], verts[c, 1], verts[c, 2]
     px, py, pz, feature = closest_on_triangle(qx, qy, qz, ax, ay, az, bx, by, bz, cx, cy, cz)
     d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
-    # the closest point's weights on the corners (barycentric coordinates)
+    # the closest point's weights on the corners (barycentric coordinates; the duplicate-code scan
+    # pairs these dot products, by shape alone, with contact.py's closest points of two segments)
     e0x, e0y, e0z = bx - ax, by - ay, bz - az
     e1x, e1y, e1z = cx - ax, cy - ay, cz - az
     e2x, e2y, e2z = px - ax, py - ay, pz - az
@@ -662,6 +663,8 @@ def _deforming_contact(mesh: tuple, d: Deform, m: int, lx: float, ly: float, lz:
     grid lists near q tested with the point's last position carried by that triangle's motion:
     (contact?, the corrected position before friction, the carried last position the correction
     and friction start from)."""
+    # The walk over the cells is _grid_fold's (as gather_near's is): Numba cannot pass a loop's
+    # body, and this one folds a carried last position per triangle besides the answer.
     x0, x1, y0, y1, z0, z1 = _grid_range(mesh, m, qx, qy, qz, r)
     dims = mesh.dims
     nx, ny = dims[m, DIMS_N], dims[m, DIMS_N + 1]
@@ -703,6 +706,10 @@ def collide_deforming_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray
     grid every substep, each point's reach widened by how far the mesh's vertices move over the
     substep (``d.moved``), and friction relative to the surface: the point moves from its last
     position carried by the surface, not from where it was."""
+    # The way into the mesh's frame and back, and the first test against its box, are
+    # collide_mesh_points' (the duplicate-code scan pairs them): that pass is left exactly as it
+    # was, so that a fixed mesh's bits and compiled code do not change, and this one differs in
+    # its reach, its lists (none) and the last position friction starts from.
     keep = 1.0 - mesh.info[m, INFO_FRICTION]
     bx, by, bz = before[0], before[1], before[2]
     ax, ay, az = after[0], after[1], after[2]

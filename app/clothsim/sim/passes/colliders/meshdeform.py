@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from ....jit import EXACT
+from ....meshsequence import frame_pair as sequence_frame_pair
 from ...clock import substep_time
 
 #: Columns of ``Deform.table``, one row per deforming mesh.
@@ -62,20 +63,9 @@ def edge_mates(tris: np.ndarray) -> np.ndarray:
     return mate.reshape(t, 3)
 
 
-@njit(inline="always", **EXACT)
-def frame_pair(t: float, fps: float, count: int, loop: bool) -> tuple[int, int, float]:
-    """The kernels' copy of :func:`clothsim.meshsequence.frame_pair`, the same expression."""
-    x = t * fps
-    if not x > 0.0:
-        return 0, 0, 0.0
-    k = math.floor(x)
-    f = x - k
-    if loop:
-        i = k % count
-        return i, (i + 1) % count, f
-    if k >= count - 1:
-        return count - 1, count - 1, 0.0
-    return k, k + 1, f
+#: :func:`clothsim.meshsequence.frame_pair` compiled: the renderer and the kernels pose a deforming
+#: mesh by the one expression.
+frame_pair = njit(inline="always", **EXACT)(sequence_frame_pair)
 
 
 @njit(inline="always", **EXACT)
