@@ -78,8 +78,10 @@ def frame_pair(t: float, fps: float, count: int, loop: bool) -> tuple[int, int, 
 
 
 def frame_name(pattern: str, number: int) -> str:
-    """The file of frame ``number``: each run of ``#`` replaced by the number, zero-padded to it."""
-    return _RUN.sub(lambda run: f"{number:0{len(run.group())}d}", pattern)
+    """The file of frame ``number``: each run of ``#`` in the file name (not in its folders)
+    replaced by the number, zero-padded to the run's width."""
+    folder, name = os.path.split(pattern)
+    return os.path.join(folder, _RUN.sub(lambda run: f"{number:0{len(run.group())}d}", name))
 
 
 #: A stage's suffixes (a USD source instead of numbered OBJ files).
