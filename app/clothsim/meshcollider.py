@@ -6,6 +6,12 @@ file. A vertex ``v`` of the file is placed at ``R (scale v) + translate`` with `
 (degrees, right-handed, x applied first); ``motion`` moves ``translate`` over time
 (:mod:`clothsim.motion`; the velocity form starts from ``translate``).
 
+A mesh may instead deform: ``"sequence": "walk_####.obj", "fps": 30`` (and ``"loop": true``) in
+place of ``path`` names a numbered series of OBJ files (:mod:`clothsim.meshsequence`): frame k,
+the k-th existing file, is the shape at time k / fps, linear between frames, held after the last
+(or, with ``loop``, back to the first over one more frame's time). The placement and ``motion``
+apply to the deformed shape as to a fixed one.
+
 What is checked on the triangles, after the OBJ reader's own checks (:mod:`clothsim.objfile`):
 
 * no triangle of zero area (collinear corners);
@@ -32,6 +38,7 @@ from typing import Any, Callable, TypeVar
 import numpy as np
 
 from . import validate as V
+from .meshsequence import MAX_FPS, USD_SUFFIXES, MeshFrames, read_sequence
 from .motion import COLLIDER_MOTION, MotionSpec, Track
 from .objfile import ObjError, read_obj
 
@@ -83,6 +90,8 @@ class MeshSpec:
     vertices: np.ndarray
     triangles: np.ndarray
     closed: bool
+    #: a deforming mesh's frames (None: a fixed shape); ``vertices`` is then its first frame
+    sequence: MeshFrames | None = None
 
     def rotation_matrix(self) -> np.ndarray:
         """R = Rz . Ry . Rx for the ``rotation`` angles (degrees)."""
@@ -91,6 +100,30 @@ class MeshSpec:
     def local_vertices(self) -> np.ndarray:
         """Vertices scaled and rotated, before the translation: (V, 3) float64."""
         return (self.vertices * self.scale) @ self.rotation_matrix().T
+
+    def local_vertices_at(self, t: float) -> np.ndarray:
+        """Vertices scaled and rotated at time ``t`` (s): the sequence's frames interpolated as the
+        simulator does (:meth:`MeshFrames.at` of the placed frames); the fixed shape without one."""
+        if self.sequence is None:
+            return self.local_vertices()
+        return self.sequence.at(self.local_frames(), t)
+
+    def local_frames(self) -> np.ndarray:
+        """Every frame's vertices scaled and rotated, before the translation: (F, V, 3) float64."""
+        assert self.sequence is not None
+        return (self.sequence.frames * self.scale) @ self.rotation_matrix().T
+
+    def surface_speed(self) -> float:
+        """The fastest a vertex of the placed shape moves by its deformation alone (m/s; 0 for a
+        fixed shape): the largest step between consecutive frames times the rate."""
+        if self.sequence is None:
+            return 0.0
+        frames = self.local_frames()
+        if self.sequence.loop:
+            frames = np.concatenate([frames, frames[:1]])
+        if frames.shape[0] < 2:
+            return 0.0
+        return float(np.linalg.norm(np.diff(frames, axis=0), axis=2).max()) * self.sequence.fps
 
     @property
     def anchor(self) -> tuple[float, float, float]:
@@ -105,7 +138,12 @@ class MeshSpec:
 
     def as_json(self) -> dict[str, Any]:
         """The object as a scene file writes it (the path resolved, so it loads from anywhere)."""
-        out: dict[str, Any] = {"path": os.path.abspath(self.file), "scale": self.scale,
+        where: dict[str, Any] = {"path": os.path.abspath(self.file)}
+        if self.sequence is not None:
+            where = {"sequence": os.path.abspath(self.file), "fps": self.sequence.fps}
+            if self.sequence.loop:
+                where["loop"] = True
+        out: dict[str, Any] = {**where, "scale": self.scale,
                                "translate": list(self.translate), "rotation": list(self.rotation),
                                "friction": self.friction}
         if self.motion is not None:
@@ -123,15 +161,19 @@ def rotation_matrix(degrees: tuple[float, float, float]) -> np.ndarray:
     return rz @ ry @ rx
 
 
-def check_topology(vertices: np.ndarray, triangles: np.ndarray, lines: np.ndarray) -> tuple[np.ndarray, bool]:
+def check_topology(vertices: np.ndarray, triangles: np.ndarray, lines: np.ndarray, areas_only: bool = False
+                   ) -> tuple[np.ndarray, bool]:
     """The triangles (outward-wound when closed) and whether the mesh is closed; raises
     :class:`~clothsim.objfile.ObjError` naming the face's line for a degenerate triangle, an edge
-    in more than two triangles, or two neighbours wound against each other."""
+    in more than two triangles, or two neighbours wound against each other. ``areas_only`` checks
+    the areas alone (a later frame of a sequence, whose edges are the first frame's)."""
     a, b, c = (vertices[triangles[:, k]] for k in range(3))
     area2 = np.linalg.norm(np.cross(b - a, c - a), axis=1)
     bad = np.flatnonzero(~(area2 > 0.0))
     if bad.size:
         raise ObjError(int(lines[bad[0]]), "face has zero area (its corners are collinear)")
+    if areas_only:
+        return triangles, False
     heads = triangles.reshape(-1)
     tails = triangles[:, [1, 2, 0]].reshape(-1)
     lo = np.minimum(heads, tails)
@@ -179,6 +221,16 @@ def _path(value: Any, at: V.At) -> str:
     return value
 
 
+def _fps(value: Any, at: V.At) -> float:
+    return V.number(gt=0.0, le=MAX_FPS)(value, at)
+
+
+def _loop(value: Any, at: V.At) -> bool:
+    if not isinstance(value, bool):
+        raise at.fail(f"expected true or false, got {V.shown(value)}")
+    return value
+
+
 #: The keys that name and place an OBJ (also those of a cloth read from one, :mod:`clothsim.clothmesh`).
 PLACEMENT = {
     "path": V.required(_path),
@@ -188,6 +240,11 @@ PLACEMENT = {
 }
 _FIELDS = V.record({
     **PLACEMENT,
+    # a collider's path is optional: a deforming mesh names its frames' pattern instead
+    "path": V.optional(_path),
+    "sequence": V.optional(_path),
+    "fps": V.optional(_fps),
+    "loop": V.default(_loop, False),
     "friction": V.required(_FRICTION),
     "motion": V.default(COLLIDER_MOTION, None),
 })
@@ -231,6 +288,14 @@ def _collider_obj(file: str) -> tuple[np.ndarray, np.ndarray, bool]:
 def MESH(value: Any, at: V.At) -> MeshSpec:  # noqa: N802 - a rule, named like the scene's records
     """The rule for one ``mesh`` object: its fields, then the OBJ file read and checked."""
     fields = _FIELDS(value, at)
+    if "path" not in fields and "sequence" not in fields:
+        raise at.key("path").fail("missing required field (or sequence, for numbered OBJ frames)")
+    if "path" in fields and "sequence" in fields:
+        raise at.key("sequence").fail("give either path (one OBJ file) or sequence (numbered OBJ frames), not both")
+    if "sequence" in fields:
+        return _sequence_mesh(fields, at)
+    if "fps" in fields or fields["loop"]:
+        raise at.key("fps" if "fps" in fields else "loop").fail("applies only to a sequence, not to a path")
     here = at.key("path")
     path = fields["path"]
     file = obj_file(here, path)
@@ -238,6 +303,39 @@ def MESH(value: Any, at: V.At) -> MeshSpec:  # noqa: N802 - a rule, named like t
     spec = MeshSpec(path=path, file=str(file), scale=fields["scale"], translate=fields["translate"],
                     rotation=fields["rotation"], friction=fields["friction"], motion=fields["motion"],
                     vertices=vertices, triangles=triangles, closed=closed)
-    if not np.isfinite(spec.local_vertices() * 2.0).all():
+    return _placed(spec, spec.local_vertices(), at)
+
+
+def _placed(spec: MeshSpec, local: np.ndarray, at: V.At) -> MeshSpec:
+    if not np.isfinite(local * 2.0).all():
         raise at.key("scale").fail(f"places the mesh's vertices beyond the float range (scale {spec.scale:g})")
     return spec
+
+
+def _sequence_mesh(fields: dict[str, Any], at: V.At) -> MeshSpec:
+    """A deforming mesh: its frames read (:func:`~clothsim.meshsequence.read_sequence`), the
+    first frame's triangles checked as a fixed mesh's, the others' areas."""
+    here = at.key("sequence")
+    pattern = fields["sequence"]
+    if "fps" not in fields:
+        raise at.key("fps").fail("missing required field (the frames' rate, for a sequence)")
+    if here.files is not None:  # the server opens only the files uploaded by name
+        raise here.fail("a sequence of OBJ files is not available for an uploaded scene; use path")
+    base = _base_dir(at.source) / pattern
+    try:
+        frames = read_sequence(str(base), fields["fps"], fields["loop"])
+    except ValueError as exc:
+        raise here.fail(str(exc)) from None
+    name = frames.files[0]
+    try:
+        triangles, closed = check_topology(frames.frames[0], frames.triangles, frames.lines)
+        for name, shape in zip(frames.files[1:], frames.frames[1:]):
+            check_topology(shape, frames.triangles, frames.lines, areas_only=True)
+    except ObjError as exc:
+        if frames.files[0].lower().endswith(USD_SUFFIXES):  # a stage's faces are numbered, not lines
+            raise here.fail(f"{name}: face {exc.line}: {exc.problem}") from None
+        raise here.fail(f"{name}: {exc}") from None
+    spec = MeshSpec(path=pattern, file=str(base), scale=fields["scale"], translate=fields["translate"],
+                    rotation=fields["rotation"], friction=fields["friction"], motion=fields["motion"],
+                    vertices=frames.frames[0], triangles=triangles, closed=closed, sequence=frames)
+    return _placed(spec, spec.local_frames(), at)

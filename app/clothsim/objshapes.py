@@ -1,9 +1,11 @@
 """Shapes the project makes itself, written as OBJ text: the bundled ``mesh`` scene's torus, a box,
-and cloths to read as ``cloth.mesh`` (a flat sheet, an open tube), with texture coordinates.
+a sphere and a sphere that breathes (a sequence of frames), and cloths to read as ``cloth.mesh`` (a flat
+sheet, an open tube), with texture coordinates.
 
-``python -m clothsim.objshapes`` rewrites the OBJ files shipped in ``scenes/`` (:func:`bundled`:
-the ``mesh`` scene's torus, the ``skirt`` scene's cloth); the test suite checks that each shipped
-file is exactly what this module writes.
+``python -m clothsim.objshapes`` rewrites every OBJ file shipped in ``scenes/`` (:func:`bundled`:
+the ``mesh`` scene's torus, the ``skirt`` scene's cloth, the ``breathing`` scene's frames in
+``scenes/breathing/``); the test suite checks that each shipped file is exactly what this module
+writes.
 """
 
 from __future__ import annotations
@@ -109,18 +111,60 @@ def box_obj(hx: float = 0.5, hy: float = 0.5, hz: float = 0.5, *, drop_top: bool
                 verts, faces)
 
 
+#: The bundled breathing body: rest radius, how far the radius swings either way, frames in one
+#: breath (the sequence loops), rings and segments of the sphere.
+BREATHING = (0.22, 0.05, 24, 12, 24)
+
+
+def sphere_obj(radius: float, rings: int, segments: int, *, squash: float = 1.0) -> str:
+    """A closed UV sphere centred at the origin, wound outwards: a vertex at each pole, ``rings``
+    - 1 rings of ``segments`` vertices between them; ``squash`` scales its height (y)."""
+    verts = [(0.0, -radius * squash, 0.0)]
+    for i in range(1, rings):
+        a = math.pi * i / rings - 0.5 * math.pi
+        for j in range(segments):
+            b = 2.0 * math.pi * j / segments
+            verts.append((radius * math.cos(a) * math.cos(b), radius * math.sin(a) * squash,
+                          radius * math.cos(a) * math.sin(b)))
+    verts.append((0.0, radius * squash, 0.0))
+    top = len(verts) - 1
+
+    def ring(i: int, j: int) -> int:
+        return 1 + (i - 1) * segments + j % segments
+
+    faces: list[tuple[int, ...]] = [(0, ring(1, j), ring(1, j + 1)) for j in range(segments)]
+    for i in range(1, rings - 1):
+        faces += [(ring(i, j), ring(i + 1, j), ring(i + 1, j + 1), ring(i, j + 1)) for j in range(segments)]
+    faces += [(ring(rings - 1, j), top, ring(rings - 1, j + 1)) for j in range(segments)]
+    return _obj(f"sphere: radius {radius:g}, height x {squash:g}, {rings} rings x {segments} segments "
+                f"(clothsim.objshapes)", verts, faces)
+
+
+def breathing_frames(radius: float, swing: float, frames: int, rings: int, segments: int) -> list[str]:
+    """One breath of a body: ``frames`` spheres whose radius goes ``radius`` + ``swing`` sin(2 pi k /
+    frames) and whose height swells a little more than their width, the same faces in every frame."""
+    out = []
+    for k in range(frames):
+        phase = math.sin(2.0 * math.pi * k / frames)
+        out.append(sphere_obj(radius + swing * phase, rings, segments, squash=1.0 + 0.15 * phase))
+    return out
+
+
 def bundled() -> dict[str, str]:
-    """Every OBJ shipped in ``scenes/``, by file name: the ``mesh`` scene's torus and the
-    ``skirt`` scene's cloth."""
-    return {"torus.obj": torus_obj(*TORUS), "skirt.obj": tube_obj(*SKIRT)}
+    """Every OBJ shipped in ``scenes/``, by path under it: the ``mesh`` scene's torus, the
+    ``skirt`` scene's cloth and the ``breathing`` scene's frames."""
+    files = {"torus.obj": torus_obj(*TORUS), "skirt.obj": tube_obj(*SKIRT)}
+    files.update({f"breathing/breath_{k:02d}.obj": text for k, text in enumerate(breathing_frames(*BREATHING))})
+    return files
 
 
 def main(argv: list[str]) -> int:
-    """Write the bundled OBJ files into the folder ``argv[0]`` (default: scenes/ of this checkout)."""
+    """Write the bundled OBJ files under the folder ``argv[0]`` (default: scenes/ of this checkout)."""
     folder = Path(argv[0]) if argv else Path(__file__).resolve().parents[2] / "scenes"
     for name, text in bundled().items():
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
         (folder / name).write_text(text, encoding="ascii")
-        print(f"wrote {folder / name}")
+    print(f"wrote {len(bundled())} OBJ files under {folder}")
     return 0
 
 

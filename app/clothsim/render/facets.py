@@ -11,10 +11,11 @@ import numpy as np
 from ..meshcollider import MeshSpec
 
 
-def mesh_collider_vertices(spec: MeshSpec) -> tuple[np.ndarray, np.ndarray]:
+def mesh_collider_vertices(spec: MeshSpec, t: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (3T, 11) float32 (position, normal, tangent, uv) scaled and rotated but not
-    translated, and indices (3T,) uint32, counter-clockwise seen from outside a closed mesh."""
-    local = spec.local_vertices()
+    translated, and indices (3T,) uint32, counter-clockwise seen from outside a closed mesh; a
+    deforming mesh's shape at time ``t`` (s) when given."""
+    local = spec.local_vertices() if t is None else spec.local_vertices_at(t)
     tris = spec.triangles
     a, b, c = (local[tris[:, k]] for k in range(3))
     normal = np.cross(b - a, c - a)

@@ -706,6 +706,10 @@ class Renderer:
         both sides when open)."""
         self._solid(look, spec.closed, False)
         vbo, ibo, idx = self._mesh_collider(spec)
+        if spec.sequence is not None:  # a deforming mesh: its shape at this time (as many vertices)
+            from .facets import mesh_collider_vertices
+
+            vbo.write(mesh_collider_vertices(spec, now)[0])
         model = np.eye(4)
         model[:3, 3] = spec.translate
         set_matrix(prog, "u_model", placement(spec, now) @ model)

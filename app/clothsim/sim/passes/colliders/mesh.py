@@ -67,6 +67,12 @@ tests decide instead for a point without a list, a point with a reachable triang
 first ``NEAR_PLANES``, a last or corrected position not strictly outside a reachable triangle's
 plane, and a closed mesh's list measured from inside it (no planes then).
 
+A deforming mesh (:mod:`.meshdeform`) takes :func:`collide_deforming_points` instead: no lists and
+no planes (they assume still triangles), the grid every substep, each point's reach widened by
+how far the mesh's vertices move over the substep, and each triangle tested with the point's last
+position carried by that triangle's own motion (:func:`_moving_tri_test`), so that the crossing
+test and friction see the point's motion relative to the surface.
+
 In the tests, ties between triangles are broken by the lower triangle index, so their answer does
 not depend on the order triangles come in, and equals the brute-force one (:func:`mesh_targets`)
 bit for bit. Each point's list is written only by the work item that owns the point.
@@ -81,10 +87,12 @@ from typing import Any
 import numba
 import numpy as np
 from numba import njit, types
+from numba.extending import overload
 
 from ....jit import BORROWED, CHUNKS, EXACT, KERNEL
 from ....jit.internals import call_native, native_address
 from ...clock import substep_time
+from .meshdeform import Deform, deform_meshes
 from .moving import Tracks, Turns, track_ends, turn_ends
 from .meshgrid import MeshGroup, mesh_group, DIMS_CELL0, DIMS_CLOSED, DIMS_N, DIMS_TRI0, DIMS_TRI1, INFO_FRICTION, \
     INFO_HI, INFO_INV_H, INFO_LO, INFO_MARGIN, INFO_NEAR, INFO_NEAR_OK, PLANE_D
@@ -605,6 +613,137 @@ def collide_mesh_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mes
                 pos[2, p] = az + u[15] * x + u[16] * y + u[17] * z
 
 
+@njit(inline="always", **EXACT)
+def _moving_tri_test(verts: np.ndarray, verts0: np.ndarray, tris: np.ndarray, fnorm: np.ndarray, t: int,
+                     lx: float, ly: float, lz: float, qx: float, qy: float, qz: float, r: float
+                     ) -> tuple[float, float, float, float, int, float, float, float, float]:
+    """:func:`tri_test` against a triangle that moved over the substep (from ``verts0`` to
+    ``verts``): the point's last position is first carried by the motion of the triangle's point
+    closest to q (its corners' displacements weighted as that point is by them), so the crossing
+    is tested on the point's motion relative to the surface there. Returns tri_test's answer and
+    the carried last position."""
+    a, b, c = tris[t, 0], tris[t, 1], tris[t, 2]
+    ax, ay, az = verts[a, 0], verts[a, 1], verts[a, 2]
+    nx, ny, nz = fnorm[t, 0], fnorm[t, 1], fnorm[t, 2]
+    dq = (qx - ax) * nx + (qy - ay) * ny + (qz - az) * nz
+    if dq > r or dq < -r:
+        return np.inf, 0.0, 0.0, 0.0, -1, -1.0, lx, ly, lz
+    bx, by, bz = verts[b, 0], verts[b, 1], verts[b, 2]
+    cx, cy, cz = verts[c, 0], verts[c, 1], verts[c, 2]
+    px, py, pz, feature = closest_on_triangle(qx, qy, qz, ax, ay, az, bx, by, bz, cx, cy, cz)
+    d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
+    # the closest point's weights on the corners (barycentric coordinates; the duplicate-code scan
+    # pairs these dot products, by shape alone, with contact.py's closest points of two segments)
+    e0x, e0y, e0z = bx - ax, by - ay, bz - az
+    e1x, e1y, e1z = cx - ax, cy - ay, cz - az
+    e2x, e2y, e2z = px - ax, py - ay, pz - az
+    d00 = e0x * e0x + e0y * e0y + e0z * e0z
+    d01 = e0x * e1x + e0y * e1y + e0z * e1z
+    d11 = e1x * e1x + e1y * e1y + e1z * e1z
+    d20 = e2x * e0x + e2y * e0y + e2z * e0z
+    d21 = e2x * e1x + e2y * e1y + e2z * e1z
+    den = d00 * d11 - d01 * d01
+    wb = (d11 * d20 - d01 * d21) / den if den > 0.0 else 0.0
+    wc = (d00 * d21 - d01 * d20) / den if den > 0.0 else 0.0
+    wa = 1.0 - wb - wc
+    clx = lx + wa * (ax - verts0[a, 0]) + wb * (bx - verts0[b, 0]) + wc * (cx - verts0[c, 0])
+    cly = ly + wa * (ay - verts0[a, 1]) + wb * (by - verts0[b, 1]) + wc * (cy - verts0[c, 1])
+    clz = lz + wa * (az - verts0[a, 2]) + wb * (bz - verts0[b, 2]) + wc * (cz - verts0[c, 2])
+    dl = (clx - ax) * nx + (cly - ay) * ny + (clz - az) * nz
+    if (dq > 0.0 and dl > 0.0) or (dq < 0.0 and dl < 0.0):
+        return d2, px, py, pz, feature, -1.0, clx, cly, clz
+    s = segment_hits(clx, cly, clz, qx, qy, qz, ax, ay, az, bx, by, bz, cx, cy, cz)
+    return d2, px, py, pz, feature, s, clx, cly, clz
+
+
+@njit(**BORROWED)
+def _deforming_contact(mesh: tuple, d: Deform, m: int, lx: float, ly: float, lz: float, qx: float, qy: float,
+                       qz: float, r: float) -> tuple[bool, float, float, float, float, float, float]:
+    """A point (mesh frame: last ``l``, now ``q``) against deforming mesh ``m``, every triangle the
+    grid lists near q tested with the point's last position carried by that triangle's motion:
+    (contact?, the corrected position before friction, the carried last position the correction
+    and friction start from)."""
+    # The walk over the cells is _grid_fold's (as gather_near's is): Numba cannot pass a loop's
+    # body, and this one folds a carried last position per triangle besides the answer.
+    x0, x1, y0, y1, z0, z1 = _grid_range(mesh, m, qx, qy, qz, r)
+    dims = mesh.dims
+    nx, ny = dims[m, DIMS_N], dims[m, DIMS_N + 1]
+    base = dims[m, DIMS_CELL0]
+    cell_start = mesh.cell_start
+    cell_tris = mesh.cell_tris
+    cell_box = mesh.cell_box
+    r2 = r * r
+    bd2, bpx, bpy, bpz, bt, bf, bs, bh = 0.0, 0.0, 0.0, 0.0, -1, -1, 0.0, -1
+    tx, ty, tz, hx, hy, hz = lx, ly, lz, lx, ly, lz
+    for cz in range(z0, z1 + 1):
+        for cy in range(y0, y1 + 1):
+            for cx in range(x0, x1 + 1):
+                cell = base + (cz * ny + cy) * nx + cx
+                for k in range(cell_start[cell], cell_start[cell + 1]):
+                    if not _far(cell_box, k, qx, qy, qz, r):
+                        t = cell_tris[k]
+                        d2, px, py, pz, f, s, clx, cly, clz = _moving_tri_test(mesh.verts, d.verts0, mesh.tris,
+                                                                               mesh.fnorm, t, lx, ly, lz, qx, qy,
+                                                                               qz, r)
+                        was_t, was_h = bt, bh
+                        bd2, bpx, bpy, bpz, bt, bf, bs, bh = _fold(t, d2, px, py, pz, f, s, r2, bd2, bpx, bpy,
+                                                                   bpz, bt, bf, bs, bh)
+                        if bt != was_t:
+                            tx, ty, tz = clx, cly, clz
+                        if bh != was_h:
+                            hx, hy, hz = clx, cly, clz
+    # the crossing decides first (see resolve), so its carried position is the one it starts from
+    if bh >= 0:
+        tx, ty, tz = hx, hy, hz
+    hit, ox, oy, oz = resolve(mesh, m, tx, ty, tz, qx, qy, qz, bd2, bpx, bpy, bpz, bt, bf, bh)
+    return hit, ox, oy, oz, tx, ty, tz
+
+
+@njit(**BORROWED)
+def collide_deforming_points(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple, m: int,
+                             before: np.ndarray, after: np.ndarray, turns: Turns | None, d: Deform) -> None:
+    """:func:`collide_mesh_points` for a deforming mesh ``m`` (:mod:`.meshdeform`): no lists, the
+    grid every substep, each point's reach widened by how far the mesh's vertices move over the
+    substep (``d.moved``), and friction relative to the surface: the point moves from its last
+    position carried by the surface, not from where it was."""
+    # The way into the mesh's frame and back, and the first test against its box, are
+    # collide_mesh_points' (the duplicate-code scan pairs them): that pass is left exactly as it
+    # was, so that a fixed mesh's bits and compiled code do not change, and this one differs in
+    # its reach, its lists (none) and the last position friction starts from.
+    keep = 1.0 - mesh.info[m, INFO_FRICTION]
+    bx, by, bz = before[0], before[1], before[2]
+    ax, ay, az = after[0], after[1], after[2]
+    near = mesh.thickness + d.moved[m]
+    info = mesh.info
+    x0, y0, z0 = info[m, INFO_LO], info[m, INFO_LO + 1], info[m, INFO_LO + 2]
+    x1, y1, z1 = info[m, INFO_HI], info[m, INFO_HI + 1], info[m, INFO_HI + 2]
+    for k in range(free.shape[0]):
+        p = free[k]
+        lx, ly, lz = last[0, p] - bx, last[1, p] - by, last[2, p] - bz
+        qx, qy, qz = pos[0, p] - ax, pos[1, p] - ay, pos[2, p] - az
+        if turns is not None:  # into the mesh's frame: Q0^T and Q1^T
+            u = turns.motion[m]
+            lx, ly, lz = (u[0] * lx + u[3] * ly + u[6] * lz, u[1] * lx + u[4] * ly + u[7] * lz,
+                          u[2] * lx + u[5] * ly + u[8] * lz)
+            qx, qy, qz = (u[9] * qx + u[12] * qy + u[15] * qz, u[10] * qx + u[13] * qy + u[16] * qz,
+                          u[11] * qx + u[14] * qy + u[17] * qz)
+        # the mesh's box holds it in every frame (see meshgrid)
+        r1 = near + (abs(qx - lx) + abs(qy - ly) + abs(qz - lz)) * _LONGER
+        if (qx + r1 < x0 or qx - r1 > x1 or qy + r1 < y0 or qy - r1 > y1 or qz + r1 < z0 or qz - r1 > z1):
+            continue
+        r = near + math.sqrt((qx - lx) ** 2 + (qy - ly) ** 2 + (qz - lz) ** 2)
+        hit, ox, oy, oz, lx, ly, lz = _deforming_contact(mesh, d, m, lx, ly, lz, qx, qy, qz, r)
+        if hit:
+            x, y, z = lx + (ox - lx) * keep, ly + (oy - ly) * keep, lz + (oz - lz) * keep
+            if turns is None:
+                pos[0, p], pos[1, p], pos[2, p] = ax + x, ay + y, az + z
+            else:  # back from the mesh's frame at the substep's end: p1 + Q1 x
+                u = turns.motion[m]
+                pos[0, p] = ax + u[9] * x + u[10] * y + u[11] * z
+                pos[1, p] = ay + u[12] * x + u[13] * y + u[14] * z
+                pos[2, p] = az + u[15] * x + u[16] * y + u[17] * z
+
+
 @njit(**BORROWED)
 def collide_meshes_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, mesh: tuple, on: np.ndarray,
                          c: int) -> None:
@@ -615,7 +754,31 @@ def collide_meshes_chunk(pos: np.ndarray, last: np.ndarray, free: np.ndarray, me
     part = free[f0:f1]
     for m in range(mesh.dims.shape[0]):
         if on[m]:
+            collide_one(pos, last, part, mesh, m, mesh.deform)
+
+
+def collide_one(pos: np.ndarray, last: np.ndarray, part: np.ndarray, mesh: tuple, m: int, d: Deform | None) -> None:
+    """The points ``part`` against mesh ``m`` at its pose: :func:`collide_deforming_points` for a
+    deforming mesh, else :func:`collide_mesh_points` (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(collide_one, inline="always", jit_options=BORROWED)
+def _collide_one(pos, last, part, mesh, m, d):  # noqa: ANN001, ANN202
+    # inlined, and without a deforming mesh (d None) only the fixed meshes' pass: the code it had
+    if isinstance(d, types.NoneType):
+        def fixed(pos, last, part, mesh, m, d):  # noqa: ANN001, ANN202
             collide_mesh_points(pos, last, part, mesh, m, mesh.pose[m, :3], mesh.pose[m, 3:], mesh.turns, False)
+
+        return fixed
+
+    def impl(pos, last, part, mesh, m, d):  # noqa: ANN001, ANN202
+        if d.which[m] >= 0:
+            collide_deforming_points(pos, last, part, mesh, m, mesh.pose[m, :3], mesh.pose[m, 3:], mesh.turns, d)
+        else:
+            collide_mesh_points(pos, last, part, mesh, m, mesh.pose[m, :3], mesh.pose[m, 3:], mesh.turns, False)
+
+    return impl
 
 
 @njit(**EXACT)
@@ -667,8 +830,28 @@ def pose_meshes(tr: Tracks | None, tu: Turns | None, pose: np.ndarray, substep: 
 
 @njit(**KERNEL)
 def pose(g: MeshGroup, substep: int) -> None:
-    """Put the moving meshes at their pose for substep ``substep``."""
+    """Put the moving meshes at their pose for substep ``substep``, and the deforming ones' vertices."""
     pose_meshes(g.tracks, g.turns, g.pose, substep)
+    deform_pose(g.deform, g, substep)
+
+
+def deform_pose(d: Deform | None, g: MeshGroup, substep: int) -> None:
+    """The deforming meshes' vertices, normals and boxes for substep ``substep``
+    (:func:`~.meshdeform.deform_meshes`); nothing, and no code, when ``d`` is None (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(deform_pose, inline="always", jit_options=KERNEL)
+def _deform_pose(d, g, substep):  # noqa: ANN001, ANN202
+    # inlined, so that a group without a deforming mesh compiles no function for it
+    if isinstance(d, types.NoneType):
+        return lambda d, g, substep: None
+
+    def impl(d, g, substep):  # noqa: ANN001, ANN202
+        deform_meshes(d, g.verts, g.tris, g.tbox, g.fnorm, g.enorm, g.vnorm, g.cell_tris, g.cell_box, g.tracks.clock,
+                      g.tracks.dt, substep)
+
+    return impl
 
 
 @njit(**EXACT)
@@ -725,7 +908,7 @@ def _untracked(g: MeshGroup) -> MeshGroup:
     return MeshGroup(g.verts, g.tris, g.tbox, g.fnorm, g.enorm, g.vnorm, g.info, g.dims, g.cell_start, g.cell_tris,
                      g.cell_box, g.near_at, g.near_n, g.near_tris, g.near_d, g.near_ref, g.near_first,
                      g.near_pl, g.pose,
-                     g.thickness, g.on, None, g.turns, g.collide)
+                     g.thickness, g.on, None, g.turns, g.deform, g.collide)
 
 
 @njit(**EXACT)

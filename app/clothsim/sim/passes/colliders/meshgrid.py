@@ -26,14 +26,17 @@ brute-force test does).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import NamedTuple
 
 import numpy as np
 
 from ....meshcollider import NEAR_D_WIDTH, NEAR_PLANES, NEAR_ROOM, PLANE_WIDTH
+from ....motion import MotionSpec
 from ....scene import Scene
 from ...clock import track_at
+from .meshdeform import ROW_WIDTH, Deform, edge_mates
 from .moving import Tracks, Turns, pack_tracks, pack_turns
 
 #: Columns of ``MeshGroup.info`` (float64) and ``MeshGroup.dims`` (int64), one row per mesh.
@@ -80,6 +83,7 @@ class MeshGroup(NamedTuple):
     on: np.ndarray  # (M,) bool: the reach flags
     tracks: Tracks | None  # the moving meshes' translations (None when none moves)
     turns: Turns | None  # their turns, motion (M, 18): Q at the substep's start and end (None when none turns)
+    deform: Deform | None  # the deforming meshes' frames and their pose (None when none deforms)
     #: address of the mesh pass compiled for this group (see :func:`clothsim.sim.solvers.frame.kernel_addresses`); 0 until known
     collide: int = 0
 
@@ -114,15 +118,24 @@ def pseudo_normals(verts: np.ndarray, tris: np.ndarray) -> tuple[np.ndarray, np.
     return fn, en, _unit_rows(vn)
 
 
-def build_grid(verts: np.ndarray, tris: np.ndarray, margin: float
+def build_grid(verts: np.ndarray, tris: np.ndarray, margin: float, frames: np.ndarray | None = None
                ) -> tuple[np.ndarray, np.ndarray, float, tuple[int, int, int], np.ndarray, np.ndarray]:
     """The uniform grid of one mesh, its triangles listed with their boxes grown by ``margin``
     (see the module's docstring): (lo, hi, inv_h, cells along x y z, cell_start, cell_tris);
-    triangle ids in ``cell_tris`` are local to ``tris``."""
-    lo = verts.min(axis=0)
-    hi = verts.max(axis=0)
-    tlo = np.minimum(np.minimum(verts[tris[:, 0]], verts[tris[:, 1]]), verts[tris[:, 2]])
-    thi = np.maximum(np.maximum(verts[tris[:, 0]], verts[tris[:, 1]]), verts[tris[:, 2]])
+    triangle ids in ``cell_tris`` are local to ``tris``. With ``frames`` (F, V, 3), a deforming
+    mesh's, each triangle's box and the grid hold it in every frame."""
+    if frames is not None:
+        corners = frames[:, tris]  # (F, T, 3 corners, 3)
+        tlo = corners.min(axis=(0, 2))
+        thi = corners.max(axis=(0, 2))
+        verts = frames.reshape(-1, 3)
+        lo = verts.min(axis=0)
+        hi = verts.max(axis=0)
+    else:
+        lo = verts.min(axis=0)
+        hi = verts.max(axis=0)
+        tlo = np.minimum(np.minimum(verts[tris[:, 0]], verts[tris[:, 1]]), verts[tris[:, 2]])
+        thi = np.maximum(np.maximum(verts[tris[:, 0]], verts[tris[:, 1]]), verts[tris[:, 2]])
     extent = np.maximum(hi - lo, 0.0)
     h = float(np.mean((thi - tlo).max(axis=1))) + margin
     if not h > 0.0:
@@ -172,11 +185,18 @@ def mesh_group(scene: Scene, clock: np.ndarray | None = None, dt: float = 0.0) -
     pose = np.zeros((len(scene.meshes), 6))
     here = np.empty(3)
     nv = nt = nc = 0
+    deforming: list[tuple] = []  # mesh, placed frames, first vertex, triangle, grid entry, fps, loop
     for m, spec in enumerate(scene.meshes):
         v = spec.local_vertices()
         t = spec.triangles
         fn, en, vn = pseudo_normals(v, t)
-        lo, hi, inv_h, n, start, cell_tris = build_grid(v, t, thickness)
+        frames = None
+        if spec.sequence is not None:
+            frames = spec.local_frames()
+            v = spec.sequence.at(frames, 0.0)
+            fn, en, vn = pseudo_normals(v, t)
+            deforming.append((m, frames, nv, nt, sum(c.size for c in cells), spec.sequence.fps, spec.sequence.loop))
+        lo, hi, inv_h, n, start, cell_tris = build_grid(v, t, thickness, frames)
         track = spec.track()
         info[m, INFO_LO:INFO_LO + 3] = lo
         info[m, INFO_HI:INFO_HI + 3] = hi
@@ -208,6 +228,15 @@ def mesh_group(scene: Scene, clock: np.ndarray | None = None, dt: float = 0.0) -
     tbox = np.ascontiguousarray(np.concatenate([corners.min(axis=1), corners.max(axis=1)], axis=1))
     cell_tris = np.ascontiguousarray(np.concatenate(cells))
     all_fnorm = np.ascontiguousarray(np.concatenate(fnorm))
+    deform = None
+    moving = scene.meshes
+    if deforming and clock is not None:
+        deform = _pack_deform(deforming, dims, all_verts, all_tris, cell_start, len(scene.meshes))
+        # a deforming mesh is posed every substep: one that does not move gets a track held at its
+        # translation, so that the group's tracks (its clock and substep length) exist
+        moving = tuple(spec if spec.motion is not None or spec.sequence is None
+                       else dataclasses.replace(spec, motion=MotionSpec(keyframes=((0.0, spec.translate),)))
+                       for spec in scene.meshes)
     return MeshGroup(all_verts, all_tris, tbox,
                      all_fnorm, np.ascontiguousarray(np.concatenate(enorm)),
                      np.ascontiguousarray(np.concatenate(vnorm)), info, dims, cell_start,
@@ -219,8 +248,29 @@ def mesh_group(scene: Scene, clock: np.ndarray | None = None, dt: float = 0.0) -
                      np.zeros((len(scene.meshes), n_points, NEAR_PLANES, PLANE_WIDTH)),
                      pose, float(thickness),
                      np.zeros(len(scene.meshes), dtype=np.bool_),
-                     None if clock is None else pack_tracks(scene.meshes, clock, dt),
-                     None if clock is None else pack_turns(scene.meshes, width=18))
+                     None if clock is None else pack_tracks(moving, clock, dt),
+                     None if clock is None else pack_turns(moving, width=18), deform)
+
+
+def _pack_deform(deforming: list, dims: np.ndarray, verts: np.ndarray, tris: np.ndarray, cell_start: np.ndarray,
+                 meshes: int) -> Deform:
+    """The :class:`~.meshdeform.Deform` of the deforming meshes (mesh row, placed frames, first
+    vertex, first triangle, first entry of its cells in the grid, fps, loop)."""
+    table = np.zeros((len(deforming), ROW_WIDTH), dtype=np.int64)
+    rate = np.zeros((len(deforming), 2))
+    which = np.full(meshes, -1, dtype=np.int64)
+    rows = 0
+    for r, (m, frames, v0, t0, e0, fps, loop) in enumerate(deforming):
+        rate[r] = (fps, 1.0 if loop else 0.0)
+        count, n = frames.shape[0], frames.shape[1]
+        cells = int(np.prod(dims[m, DIMS_N:DIMS_N + 3]))
+        e1 = int(cell_start[dims[m, DIMS_CELL0] + cells])
+        table[r] = (m, v0, v0 + n, rows, count, t0, dims[m, DIMS_TRI1], e0, e1)
+        rows += count * n
+        which[m] = r
+    seq = [spec_frames for _, spec_frames, *_ in deforming]
+    return Deform(np.ascontiguousarray(np.concatenate([f.reshape(-1, 3) for f in seq])), table, rate, which,
+                  verts.copy(), edge_mates(tris), np.zeros(meshes))
 
 
 def cells_per_mesh(group: MeshGroup) -> list[int]:

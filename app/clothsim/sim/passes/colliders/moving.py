@@ -265,14 +265,17 @@ def top_speed(scene: Any) -> float:
     touch the cloth (:func:`turn_reach`)."""
     top = 0.0
     for spec in scene.colliders:
+        # a deforming mesh's vertices move by themselves too (0 for every other collider)
+        own = spec.surface_speed() if hasattr(spec, "surface_speed") else 0.0
         if spec.motion is None:
+            top = max(top, own)
             continue
         track = spec.motion.track()  # a speed: the same from any start
         speed = float(np.linalg.norm(track.velocity))
         if len(track.times) > 1:
             steps = np.linalg.norm(np.diff(track.points, axis=0), axis=1) / np.diff(track.times)
             speed = max(speed, float(steps.max()))
-        top = max(top, speed + angular_speed(spec.motion) * turn_reach(scene, spec))
+        top = max(top, speed + angular_speed(spec.motion) * turn_reach(scene, spec) + own)
     return top
 
 
