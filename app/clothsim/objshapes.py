@@ -18,6 +18,8 @@ from pathlib import Path
 TORUS = (0.25, 0.09, 32, 12)
 #: The bundled skirt: an open tube's radius, height, quads round and rows up.
 SKIRT = (0.2, 0.45, 48, 16)
+#: The bundled cape: a sheet's width, depth and vertices along each (with a texture seam down its middle).
+CAPE = (0.9, 0.6, 37, 25)
 
 
 def _obj(header: str, vertices: list[tuple[float, float, float]], faces: list[tuple[int, ...]]) -> str:
@@ -152,8 +154,9 @@ def breathing_frames(radius: float, swing: float, frames: int, rings: int, segme
 
 def bundled() -> dict[str, str]:
     """Every OBJ shipped in ``scenes/``, by path under it: the ``mesh`` scene's torus, the
-    ``skirt`` scene's cloth and the ``breathing`` scene's frames."""
-    files = {"torus.obj": torus_obj(*TORUS), "skirt.obj": tube_obj(*SKIRT)}
+    ``skirt`` and ``cape`` scenes' cloths and the ``breathing`` scene's frames (the ``cape`` scene's
+    body too)."""
+    files = {"torus.obj": torus_obj(*TORUS), "skirt.obj": tube_obj(*SKIRT), "cape.obj": sheet_obj(*CAPE, seam=True)}
     files.update({f"breathing/breath_{k:02d}.obj": text for k, text in enumerate(breathing_frames(*BREATHING))})
     return files
 

@@ -108,7 +108,7 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
     # the bundled scenes with capsules, boxes and moving colliders (each kind present or absent,
     # moving or not, is a plan of its own: these are the ones shipped)
     items += [(f"frame kernel: bundled scene {name}", step(load_scene(name))) for name in ("tablecloth", "curtain",
-                                                                                          "capsule")]
+                                                                                          "capsule", "breathing")]
     items.append(("colliders of every kind turning", step(_turning_scene())))
     # a cloth read from an OBJ: its own plans (the cloth's group has its springs' lists)
     items += [("mesh cloth: bundled scene skirt", step(load_scene("skirt"))),
