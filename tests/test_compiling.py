@@ -367,3 +367,17 @@ def test_the_notice_estimates_the_compile_of_the_mode_a_run_uses(monkeypatch: py
     clothsim.Simulation(scene.with_simulation(self_collision=mode))
     assert notice.estimate == getattr(watch, expected)
     assert watch.CONTACT_FIRST_RUN_SECONDS > 3 * watch.FIRST_RUN_SECONDS
+
+
+@pytest.mark.parametrize("name", ["mesh", "cape"])
+def test_the_notice_estimates_a_triangle_mesh_scene(monkeypatch: pytest.MonkeyPatch, name: str) -> None:
+    # a mesh collider (fixed or deforming) or a cloth read from an OBJ compiles passes of its own
+    import io
+
+    import clothsim
+    from clothsim.jit import watch
+
+    notice = watch.CompileNotice(io.StringIO())
+    monkeypatch.setattr(watch, "_installed", notice)
+    clothsim.Simulation(clothsim.load_scene(name))
+    assert notice.estimate == watch.MESH_FIRST_RUN_SECONDS > 3 * watch.FIRST_RUN_SECONDS

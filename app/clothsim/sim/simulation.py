@@ -59,11 +59,12 @@ class Simulation:
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
-        if scene.simulation.self_collision == "contact":
+        if scene.simulation.self_collision == "contact" or scene.meshes or scene.cloth.is_mesh:
             # said before the first kernel compiles (the collider plan below may compile one)
-            from ..jit.watch import CONTACT_FIRST_RUN_SECONDS, expect
+            from ..jit.watch import CONTACT_FIRST_RUN_SECONDS, MESH_FIRST_RUN_SECONDS, expect
 
-            expect(CONTACT_FIRST_RUN_SECONDS)
+            contact = scene.simulation.self_collision == "contact"
+            expect(CONTACT_FIRST_RUN_SECONDS if contact else MESH_FIRST_RUN_SECONDS)
         cloth = scene.cloth
         # the grid's size (0 x 0 for a mesh cloth, whose surface is :attr:`surface`)
         self.nw = cloth.num_width_points
