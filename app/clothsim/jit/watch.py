@@ -21,9 +21,8 @@ FIRST_RUN_SECONDS = 10
 #: The same for a scene in the contact self-collision mode, whose kernels take most of it
 #: (``clothsim bench compile --commands contact``).
 CONTACT_FIRST_RUN_SECONDS = 65
-#: The same for a scene with a triangle mesh, as a collider or as the cloth (its own passes and
-#: plans): the bundled ``mesh`` 25.6 s, ``cape`` (a cloth read from an OBJ on a deforming mesh)
-#: 32.7 s, cold, a quiet 2-core machine (2026-12-07).
+#: The same for a scene with a triangle mesh, as a collider or as the cloth, whose passes and
+#: plans are their own (the bundled ``mesh`` and ``cape`` scenes' cold starts, docs/performance-compile.md).
 MESH_FIRST_RUN_SECONDS = 30
 
 
