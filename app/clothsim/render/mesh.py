@@ -131,6 +131,10 @@ def update_surface_vertices(positions, triangles, uv_point, uvs, uv_triangles, w
     uvs (a seam may turn u): each triangle adds dP/du times its uv area to its render corners,
     then Gram-Schmidt against the normal. Triangles are taken in order, so a grid given as a
     surface sums the same terms in the same order as :func:`update_cloth_vertices`.
+
+    (Its tangent sums and normalisations repeat the grid kernel's, which the duplicate-code scan
+    pairs: the grid's kernel is left exactly as it was, so that the grid's pixels, and the goldens,
+    do not change; this one reads triangles and uvs through indices where the grid's computes them.)
     """
     n_points = positions.shape[0]
     n_vertices = uv_point.shape[0]

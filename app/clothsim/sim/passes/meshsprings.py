@@ -155,7 +155,12 @@ def add_spring_forces(g: MeshSprings | None, pos: np.ndarray, forces: np.ndarray
 def stretch_limit(pos: np.ndarray, pinned: np.ndarray, g: MeshSprings, limit: float) -> None:
     """Provot's limit over the structural springs, in place, spring after spring: a spring longer
     than ``limit`` x rest is shortened to it, the correction split evenly or given wholly to the
-    free end; springs with both ends pinned are left alone (the grid's rule, :mod:`.provot`)."""
+    free end; springs with both ends pinned are left alone (the grid's rule, :mod:`.provot`).
+
+    (The correction of one spring repeats the grid's ``_provot_row``, which the duplicate-code
+    scan pairs: the grid's row is slices of a band read at fixed offsets, after a vectorised scan;
+    this is one list reached through indices; a shared helper would hand six coordinates back and
+    forth, and the grid's compiled row, which keeps its bits, would change.)"""
     lim2 = limit * limit
     pi, pj, prest = g.pi, g.pj, g.prest
     px, py, pz = pos[0], pos[1], pos[2]
