@@ -85,7 +85,10 @@ def spring_work(g: MeshSprings, pos: np.ndarray, c0: int, c1: int) -> None:
     from them in place, a loop over contiguous arrays that the compiler vectorises (the square
     root and the division, four springs at once: 31 against 55 us a substep for 14,406 springs on
     one core). A range is the same whatever the number of members, so the same springs take the
-    vector path and the same the remainder's: the bits do not depend on the thread count."""
+    vector path and the same the remainder's: the bits do not depend on the thread count.
+
+    (The Hooke force has the shape of the grid's ``spring_job``, which the duplicate-code scan
+    pairs; that one reads both ends as slices at a fixed offset, this one gathers them first.)"""
     si, sj, k, rest = g.si, g.sj, g.k, g.rest
     px, py, pz = pos[0], pos[1], pos[2]
     ex, ey, ez = g.buf[0], g.buf[1], g.buf[2]
