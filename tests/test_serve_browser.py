@@ -223,6 +223,8 @@ def test_a_good_upload_and_a_bundled_scene_load_and_the_screenshot(served, tmp_p
     scene["cloth"]["ks"] = 1234
     good = tmp_path / "my_cloth.json"
     good.write_text(json.dumps(scene))
+    # the page leaves alone a field the user is typing in: an earlier test may have left one focused
+    driver.execute_script("if (document.activeElement) document.activeElement.blur();")
     driver.find_element(By.ID, "upload").send_keys(str(good))
     wait_until(lambda: text(driver, "scene-name") == "my_cloth.json", what="the uploaded scene")
     assert st.engine.simulation.ks == 1234
