@@ -25,7 +25,7 @@ from ..forces import FORCES
 from ..scene import Scene
 from ..jit import EXACT
 from ..jit.compile import on_warm
-from .topology import cloth_springs, mean_mass, point_masses, rest_positions
+from .topology import cloth_springs, point_masses, rest_positions
 
 EXPLICIT_INTEGRATORS = ("verlet", "symplectic_euler")
 
@@ -48,8 +48,8 @@ def omega_max(scene: Scene) -> float:
     free = ~pinned_mask(cloth)
     if not free.any():
         return 0.0
-    if cloth.mesh is None:
-        return math.sqrt(2.0 * float(total[free].max()) / mean_mass(cloth))
+    # each point's own mass (a grid's are all one: dividing by it keeps which point is largest, and
+    # the quotient is the same correctly rounded number)
     return math.sqrt(2.0 * float((total[free] / point_masses(cloth)[free]).max()))
 
 
