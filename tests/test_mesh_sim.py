@@ -167,3 +167,46 @@ def test_the_blow_up_guard_knows_a_mesh_cloths_lightest_point(tmp_path):
     k = np.where(sp.kind == 2, 0.2, 1.0) * scene.cloth.ks
     total = np.bincount(sp.i, k, sim.num_points) + np.bincount(sp.j, k, sim.num_points)
     assert omega_max(scene) == pytest.approx(np.sqrt(2.0 * (total / sim.point_mass).max()), rel=1e-12)
+
+
+def renumbered(obj: str, seed: int) -> str:
+    """``obj`` (v and vt lines one for one, faces ``v/vt``) with its vertices in a random order."""
+    lines = obj.splitlines()
+    verts = [ln for ln in lines if ln.startswith("v ")]
+    uvs = [ln for ln in lines if ln.startswith("vt ")]
+    order = np.random.default_rng(seed).permutation(len(verts))  # new vertex k is old order[k]
+    new = np.argsort(order)
+    faces = ["f " + " ".join(f"{new[int(c.split('/')[0]) - 1] + 1}/{new[int(c.split('/')[0]) - 1] + 1}"
+                             for c in ln.split()[1:]) for ln in lines if ln.startswith("f ")]
+    return "\n".join([verts[k] for k in order] + [uvs[k] for k in order] + faces) + "\n"
+
+
+@pytest.mark.parametrize("shuffle", [False, True])
+def test_streams_and_lists_give_each_spring_its_hooke_force(tmp_path, shuffle):
+    # row by row, the springs fall on a few offsets (streams); renumbered at random, most do not
+    # (lists): either way each point gets m/m_p (m_p g + the sum of its springs' Hooke forces)
+    from clothsim.sim.passes.meshsprings import add_spring_forces
+    from clothsim.sim.passes.springs import accumulate_forces
+
+    obj = sheet_obj(1.0, 0.8, 12, 10, quads=False)
+    sim = Simulation(mesh_scene(tmp_path, renumbered(obj, 3) if shuffle else obj))
+    st = sim.plan.st
+    streamed = int(np.count_nonzero(st.k))
+    total = sim.springs.i.shape[0]
+    assert st.mesh.si.shape[0] + streamed == total
+    assert (streamed < 0.3 * total) if shuffle else (streamed > 0.9 * total)
+    rng = np.random.default_rng(1)
+    st.pos[:] += rng.normal(0.0, 0.01, st.pos.shape)
+    accumulate_forces(st.pos, st.forces, (st.offsets, st.k, st.spring_rest, st.buf), st.mass, st.gravity)
+    add_spring_forces(st.mesh, st.pos, st.forces)
+    x = st.pos.T
+    i, j = sim.springs.i, sim.springs.j
+    e = x[j] - x[i]
+    d = np.linalg.norm(e, axis=1)
+    ks = np.where(sim.springs.kind == 2, 0.2, 1.0) * 5000.0
+    f = (ks * (d - sim.springs.rest) / d)[:, None] * e
+    want = sim.point_mass[:, None] * st.gravity[None, :]
+    np.add.at(want, i, f)
+    np.add.at(want, j, -f)
+    want *= (sim.mass / sim.point_mass)[:, None]
+    assert np.abs(st.forces.T - want).max() < 1e-9 * np.abs(want).max()

@@ -27,28 +27,45 @@ def median_ms_per_frame(step, frames: int, repeats: int) -> float:  # noqa: ANN0
     return statistics.median(samples)
 
 
-def grid_as_mesh(scene, folder: Path):  # noqa: ANN001, ANN201
+#: ``--as-mesh``'s second mesh renumbers the grid's points at random within runs of this many.
+SHUFFLE_RUN = 64
+
+
+def grid_as_mesh(scene, folder: Path, shuffle: int = 0):  # noqa: ANN001, ANN201
     """``scene`` with its grid cloth written out as an OBJ of quads (the grid's starting points,
     exactly, and its UVs) and read back as a mesh cloth, with the same pins and parameters: a mesh
     cloth of the grid's points and about as many springs (a 50 x 50 grid: 14,502 springs; the
-    mesh: 14,406)."""
+    mesh: 14,406). Row by row, its springs fall on a few offsets, as a grid's (the simulator's
+    streams); with ``shuffle`` > 0 the points are renumbered at random (a fixed seed) within runs
+    of ``shuffle`` indices, as an unstructured mesh's are: near in index, near in space, but no
+    common offsets (the simulator's spring lists)."""
+    import numpy as np
+
     from ..cloth import cloth_uvs, grid_positions
 
     cloth = scene.cloth
     nw, nh = cloth.num_width_points, cloth.num_height_points
     pos = grid_positions(cloth, scene.simulation.seed)
     uvs = cloth_uvs(nw, nh)
-    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in pos.tolist()]
-    lines += [f"vt {u!r} {v!r}" for u, v in uvs.astype(float).tolist()]
+    n = nw * nh
+    new = np.arange(n)
+    if shuffle > 0:
+        rng = np.random.default_rng(0)
+        for lo in range(0, n, shuffle):
+            new[lo : lo + shuffle] = lo + rng.permutation(min(shuffle, n - lo))
+    old = np.argsort(new)  # the grid point each new index holds
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in pos[old].tolist()]
+    lines += [f"vt {u!r} {v!r}" for u, v in uvs[old].astype(float).tolist()]
     for y in range(nh - 1):
         for x in range(nw - 1):
-            a = y * nw + x + 1
-            corners = (a, a + nw, a + nw + 1, a + 1)
+            a = y * nw + x
+            corners = (new[a] + 1, new[a + nw] + 1, new[a + nw + 1] + 1, new[a + 1] + 1)
             lines.append("f " + " ".join(f"{c}/{c}" for c in corners))
     path = folder / "grid.obj"
     path.write_text("\n".join(lines) + "\n", encoding="ascii")
     mesh_cloth = {"mesh": {"path": str(path)}, "thickness": cloth.thickness, "damping": cloth.damping,
-                  "density": cloth.density, "ks": cloth.ks, "pinned_vertices": [y * nw + x for x, y in cloth.pinned]}
+                  "density": cloth.density, "ks": cloth.ks,
+                  "pinned_vertices": [int(new[y * nw + x]) for x, y in cloth.pinned]}
     data = dict(scene_json(scene))
     data["cloth"] = mesh_cloth
     return scene_from_dict(data, str(folder / "scene.json"))
@@ -65,7 +82,8 @@ def add_parser(bench_sub: argparse._SubParsersAction) -> None:
     p.add_argument("--scenes", nargs="*", help="scene names or files (default: every bundled scene)")
     p.add_argument("--as-mesh", action="store_true",
                    help="also time each grid scene with its grid read as a mesh cloth (NAME as mesh: the grid's "
-                        "points as an OBJ of quads)")
+                        "points as an OBJ of quads, row by row; NAME shuffled: renumbered within runs of "
+                        f"{SHUFFLE_RUN})")
     p.set_defaults(func=run)
 
 
@@ -90,8 +108,9 @@ def run(args: argparse.Namespace) -> int:
         if scene.meshes:
             rows.append((f"{name} -mesh", dataclasses.replace(scene, meshes=())))
         if args.as_mesh and not scene.cloth.is_mesh:
-            folder = Path(tempfile.mkdtemp(prefix="clothsim-bench-"))
-            rows.append((f"{name} as mesh", grid_as_mesh(scene, folder)))
+            for label, shuffle in (("as mesh", 0), ("shuffled", SHUFFLE_RUN)):
+                folder = Path(tempfile.mkdtemp(prefix="clothsim-bench-"))
+                rows.append((f"{name} {label}", grid_as_mesh(scene, folder, shuffle)))
     print(f"{'scene':<15}{'self-coll.':>11}{'ms/frame':>10}{'substeps/s':>12}{'x realtime':>11}"
           f"{'numpy ms':>10}{'speedup':>9}")
     for name, scene in rows:
@@ -114,5 +133,6 @@ def run(args: argparse.Namespace) -> int:
                   flush=True)
     print("medians of repeats; numpy = vectorised NumPy baseline of the same step without self-collision "
           "(and without wind; none for scenes with capsules, boxes, meshes, moving colliders or a mesh cloth); NAME -wind: the "
-          "scene above in still air; NAME -mesh: without its meshes; NAME as mesh: its grid read as a mesh cloth")
+          "scene above in still air; NAME -mesh: without its meshes; NAME as mesh: its grid read as a mesh cloth; "
+          f"NAME shuffled: the same, renumbered within runs of {SHUFFLE_RUN}")
     return 0

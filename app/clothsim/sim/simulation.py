@@ -18,7 +18,7 @@ from .passes.colliders import KIND_CALLS, SETS, kind_addresses, plan_colliders
 from .passes.colliders.plane import SURFACE_OFFSET
 from .solvers.frame import CALLS, PASS_ALL, Addresses, kernel_addresses, run_substeps, with_mesh_address
 from .passes.forces import plan_forces
-from .passes.meshsprings import pack_mesh_springs
+from .passes.meshsprings import mesh_streams, pack_mesh_springs
 from .topology import cloth_springs, mean_mass, point_masses, rest_positions, spacing
 from ..jit import CHUNKS
 from ..jit.internals import packed_value
@@ -288,7 +288,8 @@ class Simulation:
         self._blocks, _ = spring_blocks(self.nw, self.nh, cloth.enable_structural, cloth.enable_shearing,
                                         cloth.enable_bending)
         if cloth.mesh is not None:
-            # a mesh's springs are lists (passes/meshsprings.py): no grid blocks, no streams
+            # a mesh's springs: streams where an offset is common, lists for the rest
+            # (passes/meshsprings.py); no grid blocks
             self._blocks = np.zeros((0, 6), dtype=np.int64)
         # Cut springs stay in the arrays (the kernels' block layout needs every spring of a family)
         # with zero stiffness, so they make no force, and a rest length so long that Provot's
@@ -299,7 +300,12 @@ class Simulation:
         self._rest = np.where(cut, CUT_REST, self.springs.rest)
         #: The springs that act: enabled and not cut (what a wireframe should draw).
         self.live_springs: Springs = self.springs.select(~cut) if cut.any() else self.springs
-        self._stream = spring_streams(self.nw, self.nh, self._blocks, self._spring_k, self._rest)
+        if cloth.mesh is None:
+            self._stream = spring_streams(self.nw, self.nh, self._blocks, self._spring_k, self._rest)
+            self._listed = None
+        else:
+            self._stream, self._listed = mesh_streams(self.springs.i, self.springs.j, self._spring_k, self._rest,
+                                                      self.num_points)
         self._gravity = np.asarray(sim.gravity, dtype=np.float64)
         self._keep = 1.0 - cloth.damping / 100.0
         self._self_mode = _SELF_MODES[sim.self_collision]
@@ -334,7 +340,7 @@ class Simulation:
         mesh = None
         if cloth.mesh is not None:
             mesh = pack_mesh_springs(self.springs.i, self.springs.j, self._spring_k, self._rest,
-                                     self.springs.kind == STRUCTURAL, self.point_mass, self._gravity)
+                                     self.springs.kind == STRUCTURAL, self._listed, self.point_mass, self._gravity)
         # (a mesh cloth's grid is one point wide: its Provot bands, unused, then divide by 1)
         st = ClothState(self._pos, self._last, self._forces, self.pinned, self._pins, self._blocks, self._rest,
                         max(self.nw, 1), offsets, k, spring_rest, buf, self.mass, self._gravity,

@@ -1,14 +1,17 @@
 """The springs of a cloth made from a triangle mesh, and their stretch limit.
 
 A grid cloth's springs are whole-grid streams (:mod:`.springs`): every spring of a block joins a
-point to the point a fixed offset further. A mesh's springs join arbitrary pairs, so they come
-as lists: spring ``s`` joins ``si[s]`` to ``sj[s]``. Two passes, as the grid's:
+point to the point a fixed offset further. A mesh's springs join arbitrary pairs; those of an
+offset (larger index less smaller) that many points share still make a stream, in the grid's
+layout and through the grid's kernels (:func:`mesh_streams`: a mesh made row by row, such as a
+sheet or a tube, puts nearly all its springs there). The rest come as a list: spring ``s`` joins
+``si[s]`` to ``sj[s]``, ``si[s] < sj[s]``, sorted by ``si``. Two passes, as the grid's:
 
 1. per spring (:func:`spring_work`): the Hooke force ``k (|e| - rest) e / |e|``, ``e = x_j - x_i``,
    into ``buf[:, s]`` (a member writes its own ranges of springs: no cache line written by two);
-2. per point (:func:`gather`): the forces of its springs, read through a table of each point's
-   springs (``start``/``spring``/``sign``, in the order of the springs' indices), added to what
-   the grid's gather and the other forces left there, then scaled to the point's own mass.
+2. per point (:func:`gather`): the forces of its springs, those that start at it (a range of the
+   list, ``out``) less those that end at it (read through the table ``into``/``spring``), added
+   to what the streams and the other forces left there, then scaled to the point's own mass.
 
 A mesh's points do not all weigh the same (a third of each adjacent triangle's area times the
 density), while every integrator divides the forces by one mass, the mean ``m``. So the gather
@@ -32,20 +35,20 @@ from ..team import share
 
 
 class MeshSprings(NamedTuple):
-    """A mesh cloth's springs (see the module's notes): ends, stiffness, rest lengths and the
-    per-spring force buffer (3, S); each point's springs
-    (``start`` (N + 1,), ``spring``, ``sign``);
-    the mass factors ``ratio = m / m_p`` and ``extra = m_p - m``; and Provot's springs (the
-    structural ones: ends and rest lengths)."""
+    """A mesh cloth's listed springs (see the module's notes): ends, stiffness, rest lengths and
+    the per-spring force buffer (3, S); the springs that start at point p (``out[p]`` to
+    ``out[p + 1]``) and those that end there (``spring[into[p]:into[p + 1]]``); the mass factors
+    ``ratio = m / m_p`` and ``extra = m_p - m``; and Provot's springs (all the structural ones,
+    streamed or listed: ends and rest lengths)."""
 
     si: np.ndarray
     sj: np.ndarray
     k: np.ndarray
     rest: np.ndarray
     buf: np.ndarray
-    start: np.ndarray
+    out: np.ndarray
+    into: np.ndarray
     spring: np.ndarray
-    sign: np.ndarray
     ratio: np.ndarray
     extra: np.ndarray
     gravity: np.ndarray
@@ -54,27 +57,66 @@ class MeshSprings(NamedTuple):
     prest: np.ndarray
 
 
+#: An offset that at least this share of the points start a spring at makes a stream: a stream
+#: costs a vectorised pass over every point, a listed spring several times one stream entry.
+STREAM_SHARE = 0.125
+
+#: At most this many streams (each a (3, N) buffer and a pass over every point).
+MAX_STREAMS = 16
+
+
+def mesh_streams(i: np.ndarray, j: np.ndarray, k: np.ndarray, rest: np.ndarray,
+                 n: int) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """The springs ``i``-``j`` (stiffness ``k``, rest lengths ``rest``, on ``n`` points) that go
+    into streams, in the layout of :func:`clothsim.cloth.spring_streams` (offsets, k, rest,
+    buffer), and a mask of the springs left for the list. A stream holds every spring of its
+    offset; the offsets taken are the most common ones, most common first, while each is shared
+    by at least ``STREAM_SHARE`` of the points."""
+    a = np.minimum(i, j).astype(np.int64)
+    b = np.maximum(i, j).astype(np.int64)
+    off = b - a
+    values, counts = np.unique(off, return_counts=True)
+    # most common first, the smaller offset first among equals: a fixed order
+    rank = np.lexsort((values, -counts))
+    taken = [int(values[r]) for r in rank[:MAX_STREAMS] if counts[r] >= STREAM_SHARE * n]
+    offsets = np.array(taken, dtype=np.int64)
+    ks = np.zeros((len(taken), n))
+    rests = np.zeros((len(taken), n))
+    listed = np.ones(i.shape[0], dtype=bool)
+    for g, o in enumerate(taken):
+        mine = off == o
+        ks[g, a[mine]] = k[mine]
+        rests[g, a[mine]] = rest[mine]
+        listed &= ~mine
+    width = n + (int(offsets.max()) if taken else 0)
+    return (offsets, ks, rests, np.zeros((len(taken), 3, width))), listed
+
+
 def pack_mesh_springs(si: np.ndarray, sj: np.ndarray, k: np.ndarray, rest: np.ndarray, structural: np.ndarray,
-                      point_mass: np.ndarray, gravity: np.ndarray) -> MeshSprings:
-    """The group for springs ``si``-``sj`` with stiffness ``k`` and rest lengths ``rest``
-    (``structural``: which of them Provot limits) on points of masses ``point_mass``."""
+                      listed: np.ndarray, point_mass: np.ndarray, gravity: np.ndarray) -> MeshSprings:
+    """The group for springs ``si``-``sj`` with stiffness ``k`` and rest lengths ``rest`` on points
+    of masses ``point_mass``: the ``listed`` ones in the list, every ``structural`` one for Provot."""
     n = point_mass.shape[0]
+    a = np.minimum(si, sj)[listed].astype(np.int64)
+    b = np.maximum(si, sj)[listed].astype(np.int64)
+    order = np.lexsort((b, a))
+    a, b = a[order], b[order]
+    into = np.lexsort((np.arange(b.shape[0]), b))
     # unsigned indices: a load through one needs no wrap-around check (a signed one is a gather
     # with a test for a negative index)
-    si = np.ascontiguousarray(si, dtype=np.uint64)
-    sj = np.ascontiguousarray(sj, dtype=np.uint64)
-    ends = np.concatenate([si, sj]).astype(np.int64)
-    springs = np.concatenate([np.arange(si.shape[0]), np.arange(sj.shape[0])])
-    signs = np.concatenate([np.ones(si.shape[0]), -np.ones(sj.shape[0])])
-    order = np.lexsort((springs, ends))
-    start = np.zeros(n + 1, dtype=np.uint64)
-    np.cumsum(np.bincount(ends, minlength=n), out=start[1:])
+    out_start = np.zeros(n + 1, dtype=np.uint64)
+    np.cumsum(np.bincount(a, minlength=n), out=out_start[1:])
+    into_start = np.zeros(n + 1, dtype=np.uint64)
+    np.cumsum(np.bincount(b, minlength=n), out=into_start[1:])
     mean = float(point_mass.mean())
-    return MeshSprings(si, sj, np.ascontiguousarray(k, dtype=np.float64), np.ascontiguousarray(rest, dtype=np.float64),
-                       np.zeros((3, si.shape[0])), start, np.ascontiguousarray(springs[order], dtype=np.uint64),
-                       np.ascontiguousarray(signs[order]), mean / point_mass, point_mass - mean,
-                       np.asarray(gravity, dtype=np.float64), np.ascontiguousarray(si[structural]),
-                       np.ascontiguousarray(sj[structural]), np.ascontiguousarray(rest[structural], dtype=np.float64))
+    return MeshSprings(np.ascontiguousarray(a, dtype=np.uint64), np.ascontiguousarray(b, dtype=np.uint64),
+                       np.ascontiguousarray(k[listed][order], dtype=np.float64),
+                       np.ascontiguousarray(rest[listed][order], dtype=np.float64),
+                       np.zeros((3, a.shape[0])), out_start, into_start, np.ascontiguousarray(into, dtype=np.uint64),
+                       mean / point_mass, point_mass - mean, np.asarray(gravity, dtype=np.float64),
+                       np.ascontiguousarray(si[structural], dtype=np.uint64),
+                       np.ascontiguousarray(sj[structural], dtype=np.uint64),
+                       np.ascontiguousarray(rest[structural], dtype=np.float64))
 
 
 @njit(**KERNEL)
@@ -121,26 +163,34 @@ def gather(g: MeshSprings, forces: np.ndarray, c: int) -> None:
     """The c-th point range's forces made whole and scaled (see the module's notes)."""
     lo, hi = share(forces.shape[1], c, CHUNKS)
     # slices and indices from 0 or unsigned: no wrap-around test on the loads (see spring_work)
-    bx, by, bz, spring, sign = g.buf[0], g.buf[1], g.buf[2], g.spring, g.sign
-    start, extra, ratio = g.start[lo : hi + 1], g.extra[lo:hi], g.ratio[lo:hi]
+    bx, by, bz, spring = g.buf[0], g.buf[1], g.buf[2], g.spring
+    out, into, extra, ratio = g.out[lo : hi + 1], g.into[lo : hi + 1], g.extra[lo:hi], g.ratio[lo:hi]
     fxs, fys, fzs = forces[0, lo:hi], forces[1, lo:hi], forces[2, lo:hi]
     gx = g.gravity[0]
     gy = g.gravity[1]
     gz = g.gravity[2]
     for p in range(hi - lo):
-        fx = fxs[p] + extra[p] * gx
-        fy = fys[p] + extra[p] * gy
-        fz = fzs[p] + extra[p] * gz
-        for t in range(start[p], start[p + 1]):
+        # the springs that start at p and those that end there summed apart: two chains of
+        # additions, not one twice as long (the sums' latency, not the loads, set this loop's pace)
+        ox = 0.0
+        oy = 0.0
+        oz = 0.0
+        for s in range(out[p], out[p + 1]):
+            ox += bx[s]
+            oy += by[s]
+            oz += bz[s]
+        ix = 0.0
+        iy = 0.0
+        iz = 0.0
+        for t in range(into[p], into[p + 1]):
             s = spring[t]
-            w = sign[t]
-            fx += w * bx[s]
-            fy += w * by[s]
-            fz += w * bz[s]
+            ix += bx[s]
+            iy += by[s]
+            iz += bz[s]
         r = ratio[p]
-        fxs[p] = fx * r
-        fys[p] = fy * r
-        fzs[p] = fz * r
+        fxs[p] = (fxs[p] + extra[p] * gx + (ox - ix)) * r
+        fys[p] = (fys[p] + extra[p] * gy + (oy - iy)) * r
+        fzs[p] = (fzs[p] + extra[p] * gz + (oz - iz)) * r
 
 
 @njit(**KERNEL)
