@@ -240,3 +240,39 @@ def test_the_keys_of_a_sequence_name_the_field(keys, message):
     with pytest.raises(ClothsimError) as info:
         scene_from_dict({"cloth": CLOTH, "mesh": {"friction": 0.5, **keys}}, "s.json")
     assert message in str(info.value), str(info.value)
+
+
+def _object_points(path: Path, name: str) -> np.ndarray:
+    """The ``v`` lines of object ``name`` in an OBJ file."""
+    points, inside = [], False
+    for line in path.read_text(encoding="ascii").splitlines():
+        if line.startswith("o "):
+            inside = line.split()[1] == name
+        elif inside and line.startswith("v "):
+            points.append([float(x) for x in line.split()[1:]])
+    return np.array(points)
+
+
+@pytest.mark.parametrize("fmt", ["obj", "usda"])
+def test_exports_carry_the_deforming_mesh_frame_by_frame(tmp_path, fmt):
+    # the sphere grows 1 cm every 0.1 s (a frame of the sequence); frames 0, 9 and 18 at 90 a
+    # second are 0, 0.1 and 0.2 s: radii 0.20, 0.21, 0.22 about the mesh's place
+    import clothsim
+
+    sc = scene(**mesh(growing(tmp_path)))
+    out = tmp_path / ("seq/" if fmt == "obj" else "clip.usda")
+    written = clothsim.export(sc, str(out), frames=18, every=9)
+    assert written == [0, 9, 18]
+    for frame, radius in zip(written, (0.20, 0.21, 0.22)):
+        if fmt == "obj":
+            points = _object_points(out / f"cloth_{frame:05d}.obj", "mesh_0")
+        else:
+            pytest.importorskip("pxr", reason="the usd extra (usd-core) is not installed")
+            from pxr import Usd, UsdGeom
+
+            stage = Usd.Stage.Open(str(out))  # kept: a prim is valid while its stage lives
+            prim = UsdGeom.Mesh(stage.GetPrimAtPath("/World/colliders/mesh_0"))
+            points = np.array(prim.GetPointsAttr().Get(Usd.TimeCode(frame)), dtype=np.float64)
+        assert np.abs(np.linalg.norm(points - CENTRE, axis=1) - radius).max() < 1e-6
+    if fmt == "obj":
+        assert not (out / "colliders.obj").exists()  # the one collider is not static

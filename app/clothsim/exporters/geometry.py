@@ -59,6 +59,24 @@ class Collider:
     mesh: MeshData
     sphere: tuple[tuple[float, float, float], float] | None = None
     moving: Any = None
+    #: a deforming mesh's spec (its ``sequence`` set); ``mesh`` is then its shape at time 0
+    deforming: Any = None
+
+    @property
+    def animated(self) -> bool:
+        """Whether the collider changes from frame to frame: it moves, or its mesh deforms."""
+        return self.moving is not None or self.deforming is not None
+
+    def shape(self, t: float) -> MeshData:
+        """The polygons at time ``t`` (s) before the motion: a deforming mesh's shape then (at
+        its scene pose, its normals its faces'), else :attr:`mesh`."""
+        if self.deforming is None:
+            return self.mesh
+        from ..render.facets import mesh_collider_vertices
+
+        verts, _ = mesh_collider_vertices(self.deforming, t)
+        points = (verts[:, 0:3].astype(np.float64) + np.asarray(self.deforming.translate, dtype=np.float64))
+        return replace(self.mesh, points=points.astype(np.float32), normals=np.ascontiguousarray(verts[:, 3:6]))
 
     def offset(self, t: float) -> np.ndarray:
         """How far the collider has moved from the record's pose at time ``t`` (s), (3,)."""
@@ -246,7 +264,8 @@ def _meshes(scene: Scene) -> Iterator[Collider]:
         points = (verts[:, 0:3].astype(np.float64) + np.asarray(spec.translate, dtype=np.float64)).astype(np.float32)
         mesh = MeshData(points=points, normals=np.ascontiguousarray(verts[:, 3:6]),
                         uvs=np.ascontiguousarray(verts[:, 9:11]), faces=idx.astype(np.int64).reshape(-1, 3))
-        yield Collider(f"mesh_{k}", mesh, moving=spec if spec.motion is not None else None)
+        yield Collider(f"mesh_{k}", mesh, moving=spec if spec.motion is not None else None,
+                       deforming=spec if spec.sequence is not None else None)
 
 
 #: The exported geometry of each kind of collider (:data:`clothsim.colliders.KINDS`), by its key.

@@ -72,8 +72,8 @@ class ObjSequenceWriter:
         # The same in every frame: formatted once.
         self._uv_text = _rows("vt", cloth.uvs)
         self._face_text = "s off\n" + (_faces(cloth.faces, 0) if self._shared else _faces(cloth.faces, 0, cloth.uv_faces, 0))
-        self._colliders = [c for c in colliders if c.moving is None]
-        self._moving = [c for c in colliders if c.moving is not None]
+        self._colliders = [c for c in colliders if not c.animated]
+        self._moving = [c for c in colliders if c.animated]
 
     def frame(self, frame: int, points: np.ndarray, normals: np.ndarray, seconds: float = 0.0) -> None:
         """Write the cloth at ``frame`` (``seconds`` into the simulation): positions and normals
@@ -85,15 +85,16 @@ class ObjSequenceWriter:
         offset = len(points)
         uv_offset = len(self.cloth.uvs)
         for collider in self._moving:
+            shape = collider.shape(seconds)
             if collider.turns:
                 place = collider.placement(seconds)
-                moved = (collider.mesh.points.astype(np.float64) @ place[:3, :3].T + place[:3, 3]).astype(np.float32)
-                turned = (collider.mesh.normals.astype(np.float64) @ place[:3, :3].T).astype(np.float32)
-                parts.append(_mesh_text(collider.name, replace(collider.mesh, points=moved, normals=turned), offset,
+                moved = (shape.points.astype(np.float64) @ place[:3, :3].T + place[:3, 3]).astype(np.float32)
+                turned = (shape.normals.astype(np.float64) @ place[:3, :3].T).astype(np.float32)
+                parts.append(_mesh_text(collider.name, replace(shape, points=moved, normals=turned), offset,
                                         uv_offset))
             else:
-                moved = (collider.mesh.points + collider.offset(seconds)).astype(np.float32)
-                parts.append(_mesh_text(collider.name, replace(collider.mesh, points=moved), offset, uv_offset))
+                moved = (shape.points + collider.offset(seconds)).astype(np.float32)
+                parts.append(_mesh_text(collider.name, replace(shape, points=moved), offset, uv_offset))
             offset += len(moved)
             uv_offset += len(moved)
         (self.folder / cloth_name(frame)).write_text("".join(parts), encoding="ascii", newline="\n")

@@ -14,7 +14,9 @@ frames_per_sec unless resampled; ``startTimeCode``/``endTimeCode`` the first and
     /World/colliders/plane_0  Mesh: one large quad
     /World/colliders/capsule_0, box_0, mesh_0   Mesh: triangles
     a moving collider: xformOp:translate time-sampled at every exported frame (a sphere's
-    translate is its origin; a mesh's is its offset from the scene pose its points are written in)
+    translate is its origin; a mesh's is its offset from the scene pose its points are written in),
+    or xformOp:transform for one that turns; a deforming mesh (an OBJ sequence or a USD with time
+    samples): its points, normals and extent time-sampled at every exported frame as well
 
 The stage is built in memory and exported once at the end to the atomic output's temporary
 file; ``.usd`` is written in the binary crate format, as usd-core does by default.
@@ -68,6 +70,8 @@ class UsdStageWriter:
             UsdGeom.Scope.Define(self.stage, "/World/colliders")
         #: (collider, its translate op, where the op puts it at offset 0) of the moving colliders
         self._moving: list[tuple[Collider, Any, np.ndarray]] = []
+        #: (collider, its Mesh prim) of the deforming meshes
+        self._deforming: list[tuple[Collider, Any]] = []
         for collider in colliders:
             self._collider(f"/World/colliders/{collider.name}", collider)
 
@@ -107,6 +111,8 @@ class UsdStageWriter:
         mesh.CreateNormalsAttr(self._vec3f(mesh_data.normals))
         mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
         mesh.CreateExtentAttr(self._extent(mesh_data.points))
+        if collider.deforming is not None:
+            self._deforming.append((collider, mesh))
         if collider.moving is not None:
             # a turning collider: a matrix op of its placement (x -> p + Q (x - anchor))
             self._moving.append((collider, mesh.AddTransformOp() if collider.turns else mesh.AddTranslateOp(),
@@ -121,7 +127,8 @@ class UsdStageWriter:
 
     def frame(self, frame: int, points: np.ndarray, normals: np.ndarray, seconds: float = 0.0) -> None:
         """Add the time samples at ``frame`` (``seconds`` into the simulation): the cloth's
-        positions and normals (N, 3), float32, and the moving colliders' translations."""
+        positions and normals (N, 3), float32, the moving colliders' translations (or placements) and
+        the deforming meshes' points."""
         time = self.Usd.TimeCode(frame)
         self.cloth.GetPointsAttr().Set(self._vec3f(points), time)
         self.cloth.GetNormalsAttr().Set(self._vec3f(normals), time)
@@ -132,6 +139,11 @@ class UsdStageWriter:
                 op.Set(self.Gf.Matrix4d(*(float(c) for c in collider.placement(seconds).T.ravel())), time)
             else:
                 op.Set(self.Gf.Vec3d(*(float(c) for c in base + collider.offset(seconds))), time)
+        for collider, mesh in self._deforming:
+            shape = collider.shape(seconds)
+            mesh.GetPointsAttr().Set(self._vec3f(shape.points), time)
+            mesh.GetNormalsAttr().Set(self._vec3f(shape.normals), time)
+            mesh.GetExtentAttr().Set(self._extent(shape.points), time)
 
     def finish(self, start: int, end: int, fps: float) -> None:
         """Set the time range and rate, and write the stage to the path given at construction."""
