@@ -117,7 +117,7 @@ def test_an_uploaded_scene_opens_no_server_path_and_shows_no_content(server, tmp
     # name the client wrote, and nothing read from any file.
     for path, message in answers.items():
         assert message == (f'x.json: mesh.path: {V.shown(path)}: an uploaded scene may name only the OBJ files uploaded '
-                           "with it (uploaded: none) or a bundled one (cape.obj, skirt.obj, torus.obj); the server opens no other file")
+                           "with it (uploaded: none) or a bundled one (cape.obj, drum.obj, skirt.obj, torus.obj, towel.obj); the server opens no other file")
     # What was opened: the kernel's memory figures (the grid-size check) and the server's own folder.
     ours = ("/proc/meminfo", "/sys/fs/cgroup/", "/proc/self/cgroup", str(server.server._folder))
     assert opened and not [p for p in opened if not p.startswith(ours)]

@@ -1,11 +1,11 @@
 """Shapes the project makes itself, written as OBJ text: the bundled ``mesh`` scene's torus, a box,
-a sphere and a sphere that breathes (a sequence of frames), and cloths to read as ``cloth.mesh`` (a flat
-sheet, an open tube), with texture coordinates.
+a sphere and a sphere that breathes (a sequence of frames), an open drum with baffles, and cloths to
+read as ``cloth.mesh`` (a flat sheet, an open tube), with texture coordinates.
 
 ``python -m clothsim.objshapes`` rewrites every OBJ file shipped in ``scenes/`` (:func:`bundled`:
-the ``mesh`` scene's torus, the ``skirt`` scene's cloth, the ``breathing`` scene's frames in
-``scenes/breathing/``); the test suite checks that each shipped file is exactly what this module
-writes.
+the ``mesh`` scene's torus, the ``skirt``, ``cape`` and ``drum`` scenes' cloths, the ``drum`` scene's
+drum, the ``breathing`` scene's frames in ``scenes/breathing/``); the test suite checks that each
+shipped file is exactly what this module writes.
 """
 
 from __future__ import annotations
@@ -20,6 +20,11 @@ TORUS = (0.25, 0.09, 32, 12)
 SKIRT = (0.2, 0.45, 48, 16)
 #: The bundled cape: a sheet's width, depth and vertices along each (with a texture seam down its middle).
 CAPE = (0.9, 0.6, 37, 25)
+#: The bundled drum: radius, length, sides round, rows along, baffles, a baffle's height and
+#: width at the wall, the gap between a baffle and the wall.
+DRUM = (0.35, 0.54, 32, 4, 3, 0.08, 0.08, 0.0015)
+#: The bundled towel (the ``drum`` scene's cloth): a sheet's width, depth and vertices along each.
+TOWEL = (0.4, 0.4, 25, 25)
 
 
 def _obj(header: str, vertices: list[tuple[float, float, float]], faces: list[tuple[int, ...]]) -> str:
@@ -81,6 +86,53 @@ def tube_obj(radius: float, height: float, around: int, rows: int) -> str:
     cells = [(j * w + i, (j + 1) * w + i, (j + 1) * w + i + 1, j * w + i + 1) for j in range(rows) for i in range(around)]
     return _obj_uv(f"open tube: radius {radius}, height {height}, {around} x {rows} quads (clothsim.objshapes)",
                    verts, uvs, cells)
+
+
+def drum_obj(radius: float, length: float, around: int, rows: int, baffles: int, height: float, width: float,
+             gap: float) -> str:
+    """An open drum about the z axis, centred at the origin: a polygonal tube of ``around`` sides
+    (its corners at ``radius``) and ``rows`` rows from z = -``length``/2 to +``length``/2, no ends,
+    and ``baffles`` ridges along its inside, evenly spaced from the +x side. A baffle is a tent of two
+    strips meeting in a ridge ``height`` in from the wall, its two feet ``width`` apart and ``gap``
+    from the wall; it shares no vertex with the tube (an edge of three triangles is refused), and a
+    gap thinner than a cloth keeps the cloth from slipping under it. Every part is wound with its
+    normals facing the drum's axis."""
+    verts: list[tuple[float, float, float]] = []
+    faces: list[tuple[int, ...]] = []
+    zs = [length * (j / rows - 0.5) for j in range(rows + 1)]
+
+    def strip(lines: list[tuple[float, float]]) -> None:
+        # a surface swept along z through the cross-section points ``lines``, in the order given
+        first = len(verts)
+        verts.extend((x, y, z) for z in zs for x, y in lines)
+        w = len(lines)
+        faces.extend((first + j * w + i, first + j * w + i + 1, first + (j + 1) * w + i + 1, first + (j + 1) * w + i)
+                     for j in range(rows) for i in range(w - 1))
+
+    step = 2.0 * math.pi / around
+    # the tube: corners going clockwise seen from +z, so each quad faces the axis
+    first = len(verts)
+    verts.extend((radius * math.cos(-i * step), radius * math.sin(-i * step), z) for z in zs for i in range(around))
+    faces.extend((first + j * around + i, first + j * around + (i + 1) % around,
+                  first + (j + 1) * around + (i + 1) % around, first + (j + 1) * around + i)
+                 for j in range(rows) for i in range(around))
+    apothem = radius * math.cos(0.5 * step)
+
+    def wall(a: float) -> float:
+        """Distance from the axis to the tube's wall in the direction of angle ``a``."""
+        return apothem / math.cos((a % step) - 0.5 * step)
+
+    ridge = apothem - height
+    for k in range(baffles):
+        a = 2.0 * math.pi * k / baffles
+        feet = []
+        for side in (1.0, -1.0):  # the foot at the larger angle first: the same turn as the tube's corners
+            b = a + side * math.asin(0.5 * width / radius)
+            r = wall(b) - gap
+            feet.append((r * math.cos(b), r * math.sin(b)))
+        strip([feet[0], (ridge * math.cos(a), ridge * math.sin(a)), feet[1]])
+    return _obj(f"open drum: radius {radius}, length {length}, {around} x {rows} quads, {baffles} baffles "
+                f"{height} high, {width} wide, {gap} from the wall (clothsim.objshapes)", verts, faces)
 
 
 def torus_obj(ring: float, tube: float, around: int, sides: int) -> str:
@@ -154,9 +206,10 @@ def breathing_frames(radius: float, swing: float, frames: int, rings: int, segme
 
 def bundled() -> dict[str, str]:
     """Every OBJ shipped in ``scenes/``, by path under it: the ``mesh`` scene's torus, the
-    ``skirt`` and ``cape`` scenes' cloths and the ``breathing`` scene's frames (the ``cape`` scene's
-    body too)."""
-    files = {"torus.obj": torus_obj(*TORUS), "skirt.obj": tube_obj(*SKIRT), "cape.obj": sheet_obj(*CAPE, seam=True)}
+    ``skirt``, ``cape`` and ``drum`` scenes' cloths, the ``drum`` scene's drum and the ``breathing``
+    scene's frames (the ``cape`` scene's body too)."""
+    files = {"torus.obj": torus_obj(*TORUS), "skirt.obj": tube_obj(*SKIRT), "cape.obj": sheet_obj(*CAPE, seam=True),
+             "drum.obj": drum_obj(*DRUM), "towel.obj": sheet_obj(*TOWEL)}
     files.update({f"breathing/breath_{k:02d}.obj": text for k, text in enumerate(breathing_frames(*BREATHING))})
     return files
 
