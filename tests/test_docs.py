@@ -161,6 +161,14 @@ def test_readme_names_every_bundled_scene() -> None:
     assert not missing, f"README.md does not name the bundled scenes {missing}"
 
 
+def test_the_help_names_every_bundled_scene() -> None:
+    from clothsim.cli import EPILOG
+
+    listed = EPILOG.split("bundled scene:", 1)[1].split(".", 1)[0]
+    names = {word.strip(" ,()\n") for word in listed.replace("(the course's)", "").split(",")}
+    assert names == set(bundled_scene_names())
+
+
 def commands(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()):
     """(command path, parser) of every command and sub-command."""
     for action in parser._actions:

@@ -14,7 +14,7 @@ from ..errors import ClothsimError
 EPILOG = """\
 scenes: a path to a course scene file (JSON with cloth/sphere/plane), or the bare name (no / and
 no .json) of a bundled scene: pinned2, pinned4, sphere, plane, selfCollision (the course's), flag,
-shake, capsule, curtain, tablecloth, mesh, heap, push.
+shake, capsule, curtain, tablecloth, mesh, heap, push, breathing, skirt, cape, drum.
 
 examples:
   clothsim simulate scenes/sphere.json --frames 180 --out sphere.npz

@@ -112,6 +112,7 @@ def work_items() -> list[tuple[str, Callable[[], None]]]:
     items.append(("colliders of every kind turning", step(_turning_scene())))
     # a cloth read from an OBJ: its own plans (the cloth's group has its springs' lists)
     items += [("mesh cloth: bundled scene skirt", step(load_scene("skirt"))),
+              ("mesh cloth: bundled scene drum", step(load_scene("drum"))),
               ("mesh cloth: self-collision contact, colliders", step(_tiny_mesh_scene("contact", True)))]
     items += [(f"mesh cloth: self-collision {mode}", step(_tiny_mesh_scene(mode))) for mode in ("contact", "spec",
                                                                                                 "grid", "off")]

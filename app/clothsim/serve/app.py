@@ -36,7 +36,7 @@ from .engine import Engine, upload_label
 from .hub import Hub, Viewer
 from .protocol import error_reply, parse_message
 
-#: Largest uploaded scene file (the bundled ones are 342-426 bytes; a long pinned list stays far below).
+#: Largest uploaded scene file (the bundled ones are 342-3101 bytes; a long pinned list stays far below).
 MAX_SCENE_BYTES = 1 << 20
 #: Largest upload in all: the scene and the meshes and images that come with it.
 MAX_UPLOAD_BYTES = 32 << 20
