@@ -210,3 +210,42 @@ def test_streams_and_lists_give_each_spring_its_hooke_force(tmp_path, shuffle):
     np.add.at(want, j, -f)
     want *= (sim.mass / sim.point_mass)[:, None]
     assert np.abs(st.forces.T - want).max() < 1e-9 * np.abs(want).max()
+
+
+def test_implicit_euler_solves_with_each_points_own_mass(tmp_path):
+    # one substep of backward Euler, linearised, from rest on a stretched sheet of unequal masses:
+    # (M + dt^2 K) dv = dt F with M the points' own masses, solved here densely
+    scene = mesh_scene(tmp_path, skewed_sheet(), cloth={"damping": 0.0},
+                       simulation={"gravity": [0, -9.8, 0], "max_stretch": None, "integrator": "implicit_euler",
+                                   "simulation_steps": 1, "frames_per_sec": 90})
+    sim = Simulation(scene)
+    rng = np.random.default_rng(2)
+    sim.positions[:] = sim.positions * 1.03 + rng.normal(0.0, 0.003, sim.positions.shape)
+    sim.last_positions[:] = sim.positions
+    x0 = sim.positions.copy()
+    m = sim.point_mass
+    assert m.max() > 2.0 * m.min()
+    n, dt = len(m), 1.0 / 90
+    i, j, rest = sim.springs.i, sim.springs.j, sim.springs.rest
+    ks = np.where(sim.springs.kind == 2, 0.2, 1.0) * 5000.0
+    e = x0[j] - x0[i]
+    length = np.linalg.norm(e, axis=1)
+    d = e / length[:, None]
+    force = m[:, None] * np.array([0.0, -9.8, 0.0])
+    f = (ks * (length - rest))[:, None] * d
+    np.add.at(force, i, f)
+    np.add.at(force, j, -f)
+    big_k = np.zeros((3 * n, 3 * n))
+    for s in range(len(i)):
+        t = max(0.0, 1.0 - rest[s] / length[s])
+        block = ks[s] * ((1 - t) * np.outer(d[s], d[s]) + t * np.eye(3))
+        a, b = 3 * i[s], 3 * j[s]
+        big_k[a:a + 3, a:a + 3] += block
+        big_k[b:b + 3, b:b + 3] += block
+        big_k[a:a + 3, b:b + 3] -= block
+        big_k[b:b + 3, a:a + 3] -= block
+    dv = np.linalg.solve(np.diag(np.repeat(m, 3)) + dt * dt * big_k, dt * force.ravel())
+    want = x0 + dt * dv.reshape(n, 3)
+    sim.step(1)
+    moved = np.abs(want - x0).max()
+    assert np.abs(sim.positions - want).max() < 1e-6 * moved

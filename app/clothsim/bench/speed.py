@@ -98,10 +98,11 @@ def run(args: argparse.Namespace) -> int:
     names = args.scenes or bundled_scene_names()
     scenes = [load_scene(name) for name in names]  # a bad name fails before any timing
     # A scene with a force (wind) or triangle meshes is timed again without them, in the same run:
-    # their cost.
-    rows = []
+    # their cost. A scene's rows are timed in turns, repeat by repeat, so a slow spell of the
+    # machine falls on all of them alike: "vs" is each row's median over the scene's own.
+    groups = []
     for name, scene in zip(names, scenes):
-        rows.append((name, scene))
+        rows = [(name, scene)]
         for kind in FORCES:
             if getattr(scene, kind.attr):
                 rows.append((f"{name} -{kind.key}", dataclasses.replace(scene, **{kind.attr: ()})))
@@ -111,27 +112,36 @@ def run(args: argparse.Namespace) -> int:
             for label, shuffle in (("as mesh", 0), ("shuffled", SHUFFLE_RUN)):
                 folder = Path(tempfile.mkdtemp(prefix="clothsim-bench-"))
                 rows.append((f"{name} {label}", grid_as_mesh(scene, folder, shuffle)))
-    print(f"{'scene':<15}{'self-coll.':>11}{'ms/frame':>10}{'substeps/s':>12}{'x realtime':>11}"
+        groups.append(rows)
+    print(f"{'scene':<17}{'self-coll.':>11}{'ms/frame':>10}{'vs':>7}{'substeps/s':>12}{'x realtime':>11}"
           f"{'numpy ms':>10}{'speedup':>9}")
-    for name, scene in rows:
+    for rows in groups:
         for mode in ("off", "spec"):
-            sc = scene.with_simulation(self_collision=mode)
-            sim = Simulation(sc)
-            sim.step(args.warmup)
-            ms = median_ms_per_frame(sim.step, args.frames, args.repeats)
-            steps = sc.simulation.simulation_steps
-            realtime = (1e3 / sc.simulation.frames_per_sec) / ms
-            base = ""
-            ratio = ""
-            # the baseline knows only the course's static spheres and planes
-            if mode == "off" and not (scene.capsules or scene.boxes or scene.moving or sc.meshes or sc.cloth.is_mesh):
-                baseline = NumpyCloth(Simulation(sc))
-                baseline_ms = median_ms_per_frame(baseline.frame, args.baseline_frames, 3)
-                base = f"{baseline_ms:.1f}"
-                ratio = f"{baseline_ms / ms:.0f}x"
-            print(f"{name:<15}{mode:>11}{ms:>10.3f}{steps * 1e3 / ms:>12.0f}{realtime:>10.1f}x{base:>10}{ratio:>9}",
-                  flush=True)
-    print("medians of repeats; numpy = vectorised NumPy baseline of the same step without self-collision "
+            runs = []
+            for name, scene in rows:
+                sc = scene.with_simulation(self_collision=mode)
+                sim = Simulation(sc)
+                sim.step(args.warmup)
+                runs.append((name, sc, sim, []))
+            for _ in range(args.repeats):
+                for _, _, sim, samples in runs:
+                    samples.append(median_ms_per_frame(sim.step, args.frames, 1))
+            first = statistics.median(runs[0][3])
+            for name, sc, sim, samples in runs:
+                ms = statistics.median(samples)
+                steps = sc.simulation.simulation_steps
+                realtime = (1e3 / sc.simulation.frames_per_sec) / ms
+                base = ""
+                ratio = ""
+                # the baseline knows only the course's static spheres and planes
+                if mode == "off" and not (sc.capsules or sc.boxes or sc.moving or sc.meshes or sc.cloth.is_mesh):
+                    baseline = NumpyCloth(Simulation(sc))
+                    baseline_ms = median_ms_per_frame(baseline.frame, args.baseline_frames, 3)
+                    base = f"{baseline_ms:.1f}"
+                    ratio = f"{baseline_ms / ms:.0f}x"
+                print(f"{name:<17}{mode:>11}{ms:>10.3f}{ms / first:>6.2f}x{steps * 1e3 / ms:>12.0f}{realtime:>10.1f}x"
+                      f"{base:>10}{ratio:>9}", flush=True)
+    print("medians of repeats, a scene's rows timed in turns; vs = over the scene's first row; numpy = vectorised NumPy baseline of the same step without self-collision "
           "(and without wind; none for scenes with capsules, boxes, meshes, moving colliders or a mesh cloth); NAME -wind: the "
           "scene above in still air; NAME -mesh: without its meshes; NAME as mesh: its grid read as a mesh cloth; "
           f"NAME shuffled: the same, renumbered within runs of {SHUFFLE_RUN}")

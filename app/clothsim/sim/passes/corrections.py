@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...jit import EXACT
+from ...jit import CHUNKS, EXACT
 from ...jit.internals import call_native, type_ref
 
 from .provot import provot
@@ -40,7 +40,7 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
     contact_group(pos, last, post.contact, True)
     skipped += collide_group(pos, last, post.col, post.colliders, substep, scratch)
     if post.stretch_limit > 0.0:
-        if not mesh_limit(pos, post.pinned, post.mesh, post.stretch_limit, True):
+        if not mesh_limit(pos, post.pinned, post.mesh, post.stretch_limit, 0, CHUNKS, True):
             provot(pos, post.pinned, blocks, rest, nw, post.stretch_limit)
     contact_group(pos, last, post.contact, False)
     return skipped

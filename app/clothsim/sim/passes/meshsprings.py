@@ -19,8 +19,11 @@ leaves ``(m / m_p) F_p`` for point p, with ``F_p`` its whole force (gravity ``m_
 divided by ``m``, that is ``F_p / m_p``. Every entry is summed in a fixed order, so the result does
 not depend on the number of threads.
 
-Provot's limit runs over the structural springs (:func:`stretch_limit`), Gauss-Seidel in the
-springs' order, on one thread.
+Provot's limit runs over the structural springs (:func:`stretch_limit`), Gauss-Seidel, in two
+phases as the grid's bands and cuts: first the springs with both ends in one of the CHUNKS point
+ranges, range by range (ranges share no point, so the members of the thread team take theirs
+side by side), then the springs between two ranges, in order, on one member. Which member takes
+a range changes nothing, so neither does the number of threads.
 """
 
 from __future__ import annotations
@@ -39,7 +42,8 @@ class MeshSprings(NamedTuple):
     the per-spring force buffer (3, S); the springs that start at point p (``out[p]`` to
     ``out[p + 1]``) and those that end there (``spring[into[p]:into[p + 1]]``); the mass factors
     ``ratio = m / m_p`` and ``extra = m_p - m``; and Provot's springs (all the structural ones,
-    streamed or listed: ends and rest lengths)."""
+    streamed or listed: ends and rest lengths), those within point range c from ``pstart[c]`` to
+    ``pstart[c + 1]``, those between ranges from ``pstart[CHUNKS]`` on."""
 
     si: np.ndarray
     sj: np.ndarray
@@ -55,6 +59,7 @@ class MeshSprings(NamedTuple):
     pi: np.ndarray
     pj: np.ndarray
     prest: np.ndarray
+    pstart: np.ndarray
 
 
 #: An offset that at least this share of the points start a spring at makes a stream: a stream
@@ -109,14 +114,24 @@ def pack_mesh_springs(si: np.ndarray, sj: np.ndarray, k: np.ndarray, rest: np.nd
     into_start = np.zeros(n + 1, dtype=np.uint64)
     np.cumsum(np.bincount(b, minlength=n), out=into_start[1:])
     mean = float(point_mass.mean())
+    # Provot's springs by the point range of their ends (CHUNKS: those between two ranges), each
+    # group in the springs' order
+    pi, pj, prest = si[structural], sj[structural], rest[structural]
+    bounds = np.array([share(n, c, CHUNKS)[0] for c in range(CHUNKS)] + [n])
+    ci = np.searchsorted(bounds, pi, side="right") - 1
+    cj = np.searchsorted(bounds, pj, side="right") - 1
+    group = np.where(ci == cj, ci, CHUNKS)
+    porder = np.argsort(group, kind="stable")
+    pstart = np.zeros(CHUNKS + 1, dtype=np.int64)
+    np.cumsum(np.bincount(group, minlength=CHUNKS + 1)[:CHUNKS], out=pstart[1:])
     return MeshSprings(np.ascontiguousarray(a, dtype=np.uint64), np.ascontiguousarray(b, dtype=np.uint64),
                        np.ascontiguousarray(k[listed][order], dtype=np.float64),
                        np.ascontiguousarray(rest[listed][order], dtype=np.float64),
                        np.zeros((3, a.shape[0])), out_start, into_start, np.ascontiguousarray(into, dtype=np.uint64),
                        mean / point_mass, point_mass - mean, np.asarray(gravity, dtype=np.float64),
-                       np.ascontiguousarray(si[structural], dtype=np.uint64),
-                       np.ascontiguousarray(sj[structural], dtype=np.uint64),
-                       np.ascontiguousarray(rest[structural], dtype=np.float64))
+                       np.ascontiguousarray(pi[porder], dtype=np.uint64),
+                       np.ascontiguousarray(pj[porder], dtype=np.uint64),
+                       np.ascontiguousarray(prest[porder], dtype=np.float64), pstart)
 
 
 @njit(**KERNEL)
@@ -169,6 +184,15 @@ def gather(g: MeshSprings, forces: np.ndarray, c: int) -> None:
     gx = g.gravity[0]
     gy = g.gravity[1]
     gz = g.gravity[2]
+    if out[hi - lo] == out[0] and into[hi - lo] == into[0]:
+        # no listed spring touches the range (a mesh whose springs are all in streams): the
+        # scaling alone, a loop the compiler vectorises
+        for p in range(hi - lo):
+            r = ratio[p]
+            fxs[p] = (fxs[p] + extra[p] * gx) * r
+            fys[p] = (fys[p] + extra[p] * gy) * r
+            fzs[p] = (fzs[p] + extra[p] * gz) * r
+        return
     for p in range(hi - lo):
         # the springs that start at p and those that end there summed apart: two chains of
         # additions, not one twice as long (the sums' latency, not the loads, set this loop's pace)
@@ -205,8 +229,8 @@ def add_spring_forces(g: MeshSprings | None, pos: np.ndarray, forces: np.ndarray
 
 
 @njit(**KERNEL)
-def stretch_limit(pos: np.ndarray, pinned: np.ndarray, g: MeshSprings, limit: float) -> None:
-    """Provot's limit over the structural springs, in place, spring after spring: a spring longer
+def stretch_limit(pos: np.ndarray, pinned: np.ndarray, g: MeshSprings, limit: float, s0: int, s1: int) -> None:
+    """Provot's limit over Provot's springs ``s0..s1-1``, in place, spring after spring: a spring longer
     than ``limit`` x rest is shortened to it, the correction split evenly or given wholly to the
     free end; springs with both ends pinned are left alone (the grid's rule, :mod:`.provot`).
 
@@ -217,7 +241,7 @@ def stretch_limit(pos: np.ndarray, pinned: np.ndarray, g: MeshSprings, limit: fl
     lim2 = limit * limit
     pi, pj, prest = g.pi, g.pj, g.prest
     px, py, pz = pos[0], pos[1], pos[2]
-    for s in range(pi.shape[0]):
+    for s in range(s0, s1):
         a = pi[s]
         b = pj[s]
         ex = px[b] - px[a]
@@ -266,11 +290,15 @@ def mesh_gather(g: MeshSprings | None, forces: np.ndarray, c: int) -> None:
 
 
 @njit(**KERNEL)
-def mesh_limit(pos: np.ndarray, pinned: np.ndarray, g: MeshSprings | None, limit: float, run: bool) -> bool:
-    """For a mesh cloth, :func:`stretch_limit` (when ``run``: the member that runs it) and True;
+def mesh_limit(pos: np.ndarray, pinned: np.ndarray, g: MeshSprings | None, limit: float, c0: int, c1: int,
+               between: bool) -> bool:
+    """For a mesh cloth, :func:`stretch_limit` over the springs within point ranges ``c0..c1-1``
+    and, when ``between``, then over those between ranges (see the module's notes), and True;
     False for a grid (whose caller runs the grid's Provot instead)."""
     if g is None:
         return False
-    if run:
-        stretch_limit(pos, pinned, g, limit)
+    for c in range(c0, c1):
+        stretch_limit(pos, pinned, g, limit, g.pstart[c], g.pstart[c + 1])
+    if between:
+        stretch_limit(pos, pinned, g, limit, g.pstart[CHUNKS], g.pi.shape[0])
     return True

@@ -80,6 +80,8 @@ class IntegratorState:
         self.iterations = int(getattr(sim, "xpbd_iterations", XPBD_ITERATIONS))
         self.mask = (~sim.pinned).astype(np.float64)
         self.inv_mass = self.mask / sim.point_mass
+        #: a mesh cloth's point masses for implicit Euler's mass matrix (None: a grid's one mass)
+        self.point_mass = None if sim.scene.cloth.mesh is None else np.ascontiguousarray(sim.point_mass)
         self.scratch = np.zeros((7, 3, n))
         self.cg_iterations = 0
         #: implicit Euler: its last substep's CG iterations, and ``Implicit.at`` (see _advance)
@@ -106,6 +108,8 @@ class IntegratorState:
         if self._spring_k is not sim.spring_stiffness or self.mask.shape[0] != sim.pinned.shape[0]:
             self.bind_springs(sim)
             self.inv_mass = self.mask / sim.point_mass
+            if self.point_mass is not None:
+                self.point_mass = np.ascontiguousarray(sim.point_mass)
         return self
 
     def copy(self) -> "IntegratorState":
@@ -189,7 +193,7 @@ def _advance(sim: Any, steps: int) -> None:
         # Rate damping goes into the implicit system; spec damping scales the solved velocity.
         keep_after = 1.0 if c > 0.0 else f
         implicit = Implicit(st.mask, st.si, st.sj, st.kspr, st.jac, st.scratch, c, keep_after, CG_TOLERANCE,
-                            CG_MAX_ITERATIONS, st.cg_last)
+                            CG_MAX_ITERATIONS, st.cg_last, st.point_mass)
     elif name == "xpbd":
         xpbd = Xpbd(st.inv_mass, st.si, st.sj, st.kspr, st.lam, st.iterations)
     else:  # the scene validator only admits the four names above

@@ -273,9 +273,15 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 gen = barrier(sync, size, gen, np.int64(LAP_COLLIDE))
                 if gen < 0:
                     return
-        if provot_on and mesh_limit(pos, st.pinned, st.mesh, st.stretch_limit, member == 0):
-            # a mesh cloth's springs are one list, limited by one member
+        if provot_on and mesh_limit(pos, st.pinned, st.mesh, st.stretch_limit, c0, c1, False):
+            # a mesh cloth's springs within the members' point ranges side by side, then those
+            # between ranges on one member
             gen = barrier(sync, size, gen, np.int64(LAP_BANDS))
+            if gen < 0:
+                return
+            if member == 0:
+                mesh_limit(pos, st.pinned, st.mesh, st.stretch_limit, 0, 0, True)
+            gen = barrier(sync, size, gen, np.int64(LAP_CUTS))
             if gen < 0:
                 return
         elif provot_on:

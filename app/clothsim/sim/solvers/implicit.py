@@ -4,7 +4,9 @@ Per substep: (M (1 + c dt) + dt^2 K) dv = dt (F(x0) - c M v0 - dt K v0), v1 = v0
 x1 = x0 + dt v1, with K = -dF/dx assembled per spring as 3x3 blocks
 Ks = k (d d^T + max(0, 1 - L/l) (I - d d^T)). The compressive part of the transverse term is
 dropped (clamped at 0) so the matrix stays symmetric positive definite and conjugate gradient
-applies. Pinned points are removed by masking (their dv is 0). Jacobi preconditioner.
+applies. Pinned points are removed by masking (their dv is 0). Jacobi preconditioner. M is the
+one mass of a grid's points, or a mesh cloth's point masses on the diagonal (``Implicit.point_mass``;
+the forces arrive scaled by m / m_p, :mod:`~clothsim.sim.passes.meshsprings`, and are unscaled here).
 
 The rule is one compiled function, :func:`implicit_update` (its helpers inlined into it), that the
 substep calls by address (``Implicit.at``): its fast-math code then exists once, as compiled, and a
@@ -20,7 +22,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from numba import njit, types
+from numba.extending import overload
 
 from ...jit import KERNEL
 from ...jit.internals import native_address
@@ -43,6 +46,8 @@ class Implicit(NamedTuple):
     tol: float
     max_iter: int
     its: np.ndarray
+    #: a mesh cloth's point masses (N,); None for a grid (one mass, the substep's)
+    point_mass: np.ndarray | None = None
     at: int = 0
 
 
@@ -105,6 +110,42 @@ def apply_stiffness(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, y: np.ndarr
         out[2, b] -= gz
 
 
+def _own_mass(m: float, point_mass: np.ndarray | None, q: int) -> float:
+    """Point q's mass: ``m`` for a grid (``point_mass`` None), else ``point_mass[q]`` (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_own_mass, jit_options=KERNEL, inline="always")
+def _own_mass_impl(m, point_mass, q):  # noqa: ANN001, ANN202
+    if isinstance(point_mass, types.NoneType):
+        return lambda m, point_mass, q: m
+    return lambda m, point_mass, q: point_mass[q]
+
+
+def _own_factor(m_eff: float, one: float, point_mass: np.ndarray | None, q: int) -> float:
+    """Point q's ``m (1 + c dt)``: ``m_eff`` for a grid, else ``point_mass[q] * one`` (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_own_factor, jit_options=KERNEL, inline="always")
+def _own_factor_impl(m_eff, one, point_mass, q):  # noqa: ANN001, ANN202
+    if isinstance(point_mass, types.NoneType):
+        return lambda m_eff, one, point_mass, q: m_eff
+    return lambda m_eff, one, point_mass, q: point_mass[q] * one
+
+
+def _own_force(forces: np.ndarray, ax: int, q: int, m: float, point_mass: np.ndarray | None) -> float:
+    """Point q's force along ``ax``: as given for a grid, else unscaled from m / m_p (compiled code only)."""
+    raise NotImplementedError("compiled code only")
+
+
+@overload(_own_force, jit_options=KERNEL, inline="always")
+def _own_force_impl(forces, ax, q, m, point_mass):  # noqa: ANN001, ANN202
+    if isinstance(point_mass, types.NoneType):
+        return lambda forces, ax, q, m, point_mass: forces[ax, q]
+    return lambda forces, ax, q, m, point_mass: forces[ax, q] * (point_mass[q] / m)
+
+
 @njit(inline="always", **KERNEL)
 def _dot(x: np.ndarray, y: np.ndarray) -> float:
     acc = 0.0
@@ -117,8 +158,10 @@ def _dot(x: np.ndarray, y: np.ndarray) -> float:
 @njit(inline="always", **KERNEL)
 def solve_velocity_change(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, mask: np.ndarray, b: np.ndarray,
                           diag: np.ndarray, m_eff: float, h2: float, dv: np.ndarray, r: np.ndarray,
-                          z: np.ndarray, p: np.ndarray, ap: np.ndarray, tol: float, max_iter: int) -> int:
-    """Preconditioned CG for (m_eff I + h2 K) dv = b on the free points; returns iterations used."""
+                          z: np.ndarray, p: np.ndarray, ap: np.ndarray, tol: float, max_iter: int, one: float,
+                          point_mass: np.ndarray | None) -> int:
+    """Preconditioned CG for (M_eff + h2 K) dv = b on the free points, M_eff = m_eff I for a grid
+    or diag(point_mass) (1 + c dt) = ``one``; returns iterations used."""
     n = b.shape[1]
     dv[:, :] = 0.0
     bb = _dot(b, b)
@@ -137,7 +180,7 @@ def solve_velocity_change(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, mask:
         apply_stiffness(jac, si, sj, p, ap)
         for ax in range(3):
             for q in range(n):
-                ap[ax, q] = (m_eff * p[ax, q] + h2 * ap[ax, q]) * mask[q]
+                ap[ax, q] = (_own_factor(m_eff, one, point_mass, q) * p[ax, q] + h2 * ap[ax, q]) * mask[q]
         pap = _dot(p, ap)
         if not pap > 0.0:
             break
@@ -164,8 +207,9 @@ def solve_velocity_change(jac: np.ndarray, si: np.ndarray, sj: np.ndarray, mask:
 def implicit_update(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: np.ndarray, free: np.ndarray,
                     mask: np.ndarray, si: np.ndarray, sj: np.ndarray, rest: np.ndarray, kspr: np.ndarray,
                     jac: np.ndarray, scratch: np.ndarray, mass: float, dt: float, c: float, keep_after: float,
-                    tol: float, max_iter: int, its: np.ndarray) -> None:
-    """One linearised backward-Euler update of velocities and positions (free points only).
+                    tol: float, max_iter: int, its: np.ndarray, point_mass: np.ndarray | None) -> None:
+    """One linearised backward-Euler update of velocities and positions (free points only), with
+    one mass ``mass`` (a grid; ``point_mass`` None) or each point's own.
 
     ``scratch`` is (7, 3, N): b, diag, dv, r, z, p, Ap. The CG iterations used go to ``its[0]``.
     Called by address only (see the module's notes).
@@ -175,19 +219,21 @@ def implicit_update(pos: np.ndarray, last: np.ndarray, vel: np.ndarray, forces: 
     dv = scratch[2]
     n = pos.shape[1]
     spring_jacobians(pos, si, sj, rest, kspr, jac)
+    one = 1.0 + c * dt
     m_eff = mass * (1.0 + c * dt)
     h2 = dt * dt
     apply_stiffness(jac, si, sj, vel, scratch[6])
     for ax in range(3):
         for q in range(n):
-            b[ax, q] = dt * (forces[ax, q] - c * mass * vel[ax, q] - dt * scratch[6][ax, q]) * mask[q]
-            diag[ax, q] = m_eff
+            b[ax, q] = dt * (_own_force(forces, ax, q, mass, point_mass) - c * _own_mass(mass, point_mass, q)
+                             * vel[ax, q] - dt * scratch[6][ax, q]) * mask[q]
+            diag[ax, q] = _own_factor(m_eff, one, point_mass, q)
     for s in range(si.shape[0]):
         for ax in range(3):
             diag[ax, si[s]] += h2 * jac[ax, s]
             diag[ax, sj[s]] += h2 * jac[ax, s]
     its[0] = solve_velocity_change(jac, si, sj, mask, b, diag, m_eff, h2, dv, scratch[3], scratch[4], scratch[5],
-                                   scratch[6], tol, max_iter)
+                                   scratch[6], tol, max_iter, one, point_mass)
     for ax in range(3):
         for k in range(free.shape[0]):
             q = free[k]

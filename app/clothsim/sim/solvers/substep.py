@@ -76,7 +76,7 @@ def implicit_arguments(s: Step, g: Implicit) -> tuple:
     """The arguments of :func:`~.implicit.implicit_update` for a substep, in its order (also called
     from Python, for the types its address is compiled for: :func:`implicit_address`)."""
     return (s.pos, s.last, s.vel, s.forces, s.free, g.mask, g.si, g.sj, s.rest, g.kspr, g.jac, g.scratch, s.mass,
-            s.dt, g.c, g.keep_after, g.tol, g.max_iter, g.its)
+            s.dt, g.c, g.keep_after, g.tol, g.max_iter, g.its, g.point_mass)
 
 
 def implicit_address(s: Step, g: Implicit) -> int:
