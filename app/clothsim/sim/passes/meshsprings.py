@@ -140,8 +140,7 @@ def spring_work(g: MeshSprings, pos: np.ndarray, c0: int, c1: int) -> None:
 
     Each range in two loops: the springs' end-to-end vectors gathered into ``buf``, then the forces
     from them in place, a loop over contiguous arrays that the compiler vectorises (the square
-    root and the division, four springs at once: 31 against 55 us a substep for 14,406 springs on
-    one core). A range is the same whatever the number of members, so the same springs take the
+    root and the division, several springs at once; docs/performance.md has the figures). A range is the same whatever the number of members, so the same springs take the
     vector path and the same the remainder's: the bits do not depend on the thread count.
 
     (The Hooke force has the shape of the grid's ``spring_job``, which the duplicate-code scan
