@@ -25,7 +25,7 @@ from clothsim.sim.solvers.frame import PASS_ALL
 
 from clothsim.jit import BORROWED, EXACT
 from clothsim.sim.crossings import count_crossings
-from clothsim.sim.passes.contact import _edge_edge, _point_triangle
+from clothsim.sim.passes.contactsearch import _edge_edge, _point_triangle
 
 SCENES = Path(__file__).resolve().parents[1] / "scenes"
 INTEGRATIONS = [("verlet", "spec"), ("verlet", "rate"), ("symplectic_euler", "spec"), ("implicit_euler", "spec"),
@@ -41,7 +41,8 @@ def folded_cloth(frames: int = 70) -> Simulation:
     """The 20 x 20 cloth folded on the floor: from frame ``frames`` on, the first frame from whose
     positions a rebuild stores more than 10 point-triangle and 10 edge-edge pairs (which frame that
     is depends on the contact mode's bits; the tests below need pairs of both kinds to check)."""
-    from clothsim.sim.passes.contact import contact_group, rebuild
+    from clothsim.sim.passes.contactgroup import contact_group
+    from clothsim.sim.passes.contactsearch import rebuild
 
     sim = Simulation(self_collision_scene(20))
     sim.step(frames)
@@ -227,7 +228,9 @@ def test_no_pair_is_held_closer_than_the_floor() -> None:
     # Two triangles, the upper one driven straight down onto the lower one, still, at every
     # rebuild: the gap shrinks by GAMMA x (gap - floor) each time, towards FLOOR x the contact
     # distance and never below it (without the floor: 0.02 x 0.55^60, 5e-18 m).
-    from clothsim.sim.passes.contact import FLOOR, GAMMA, bound, contact_group, rebuild
+    from clothsim.sim.passes.contactgroup import FLOOR, GAMMA, contact_group
+    from clothsim.sim.passes.contactsearch import rebuild
+    from clothsim.sim.passes.contactresponse import bound
 
     lower = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
     upper = [[0.1, 0.1, 0.02], [1.1, 0.1, 0.02], [0.1, 1.1, 0.02]]
@@ -259,7 +262,8 @@ def test_the_broad_phase_finds_every_pair_brute_force_finds(frames: int) -> None
     # landing (35: points within the query radius, none yet within the contact distance) and folded
     # on the floor (70): the same pairs stored, with the same weights, normals and balls as testing
     # every pair
-    from clothsim.sim.passes.contact import FLOOR, GAMMA, contact_group, rebuild
+    from clothsim.sim.passes.contactgroup import FLOOR, GAMMA, contact_group
+    from clothsim.sim.passes.contactsearch import rebuild
 
     if frames == 70:
         sim = folded_cloth(frames)
@@ -289,7 +293,8 @@ def test_the_broad_phase_finds_every_pair_brute_force_finds(frames: int) -> None
 def test_the_batched_tests_give_the_one_at_a_time_tests_bits() -> None:
     # the rebuild tests its pairs in vectorised batches: on a folded cloth, every stored pair's
     # weights and normal and every ball equal bit for bit to the scalar tests' in the same order
-    from clothsim.sim.passes.contact import FLOOR, GAMMA, contact_group, rebuild
+    from clothsim.sim.passes.contactgroup import FLOOR, GAMMA, contact_group
+    from clothsim.sim.passes.contactsearch import rebuild
 
     sim = folded_cloth()
     x = np.ascontiguousarray(sim.positions.T)
@@ -311,8 +316,9 @@ def test_the_batched_tests_give_the_one_at_a_time_tests_bits() -> None:
 def _joined(x: np.ndarray, c, members: int) -> tuple:  # noqa: ANN001
     """A rebuild searched by ``members`` members, each its parts, then joined: what it stored, and
     whether a part found more pairs than its share of the arrays holds."""
-    from clothsim.sim.passes.contact import CUT, DROPPED, FLAG, N_EE, N_PT, SIZE, contact_search, contact_stale, \
-        fall_back, join, overflowed
+    from clothsim.sim.passes.contact import contact_stale
+    from clothsim.sim.passes.contactgroup import CUT, DROPPED, FLAG, N_EE, N_PT, SIZE
+    from clothsim.sim.passes.contactsearch import contact_search, fall_back, join, overflowed
 
     flags = [np.zeros(FLAG, np.int64) for _ in range(members)]
     c.meta[0] = 0  # no reference (as at a frame's start): stale for every member
@@ -342,7 +348,8 @@ def test_a_part_over_its_share_has_the_first_member_search_the_rebuild_again_in_
     # long enough for all of a rebuild's pairs) have the first member search the whole rebuild again
     # as one part, and the cloth moves as it does with arrays of the usual length, bit for bit
     from clothsim.sim import simulation as simulation_module
-    from clothsim.sim.passes.contact import DROPPED, PARTS, overflowed
+    from clothsim.sim.passes.contactgroup import DROPPED, PARTS
+    from clothsim.sim.passes.contactsearch import overflowed
 
     want = Simulation(self_collision_scene(20))
     monkeypatch.setattr(simulation_module, "contact_group", with_pair_arrays(simulation_module.contact_group, 200))
@@ -361,7 +368,7 @@ def test_a_frame_that_finds_more_pairs_than_the_arrays_hold_is_run_again_with_lo
     # with arrays twice as long, until none is dropped; the cloth moves as with arrays of the usual
     # length, bit for bit, on the fast path and on another integrator's
     from clothsim.sim import simulation as simulation_module
-    from clothsim.sim.passes.contact import DROPPED
+    from clothsim.sim.passes.contactgroup import DROPPED
 
     usual = simulation_module.contact_group
     short = with_pair_arrays(usual, 8)
@@ -385,7 +392,7 @@ def test_a_rebuild_searched_in_parts_by_the_team_stores_what_one_sweep_stores(ro
     # part, for one to three members and with the parts shared out by the last rebuild's costs;
     # with pair arrays that hold all the pairs but not a part's in its share (the whole rebuild
     # searched again as one part), or half the pairs (the rest dropped, as one sweep drops them)
-    from clothsim.sim.passes.contact import join, search
+    from clothsim.sim.passes.contactsearch import join, search
 
     sim = folded_cloth()
     x = np.ascontiguousarray(sim.positions.T)
@@ -422,7 +429,9 @@ def test_a_pin_that_leaves_a_small_ball_is_counted_in_that_substep() -> None:
     # A pin 1 mm above a free triangle (a ball of 0.45 mm, far below ROOMY's) driven 2 mm down in
     # one substep: the pass must rebuild then and count the substep unsafe, not wait for the next
     # frame (a free point with a small ball may wait, clamped; a pin is never clamped).
-    from clothsim.sim.passes.contact import GAMMA, REBUILDS, ROOMY, UNSAFE, contact_group, contact_respond, rebuild
+    from clothsim.sim.passes.contact import contact_respond
+    from clothsim.sim.passes.contactgroup import GAMMA, REBUILDS, ROOMY, UNSAFE, contact_group
+    from clothsim.sim.passes.contactsearch import rebuild
 
     lower = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
     upper = [[0.2, 0.2, 0.001], [1.2, 0.2, 0.001], [0.2, 1.2, 0.001]]
@@ -440,7 +449,7 @@ def test_a_pin_that_leaves_a_small_ball_is_counted_in_that_substep() -> None:
 def test_a_pin_put_out_of_its_ball_through_the_api_is_counted() -> None:
     # a pin moved between frames through the API jumps there in no substep, so no pass bounds
     # it: out of its ball it is counted unsafe once, inside it (or with no reference) not at all
-    from clothsim.sim.passes.contact import UNSAFE
+    from clothsim.sim.passes.contactgroup import UNSAFE
 
     scene = self_collision_scene(12)
     scene = scene.with_cloth(pinned=[[0, 0]])
@@ -467,7 +476,9 @@ def test_the_response_pushes_an_isolated_pair_by_its_sweeps(sweeps: int) -> None
     # A free point 0.05 above a pinned triangle, contact distance 0.1, not moving: each sweep
     # removes PUSH (one sweep) or PUSH_MOVING (SWEEPS_MOVING sweeps, while pins move) of the
     # overlap left, so 1 - (1 - push)^sweeps of it goes.
-    from clothsim.sim.passes.contact import MOVING, PUSH, PUSH_MOVING, SWEEPS_MOVING, contact_group, rebuild, respond
+    from clothsim.sim.passes.contactgroup import MOVING, PUSH, PUSH_MOVING, SWEEPS_MOVING, contact_group
+    from clothsim.sim.passes.contactsearch import rebuild
+    from clothsim.sim.passes.contactresponse import respond
 
     x = np.ascontiguousarray(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.2, 0.05, 0.2]]).T)
     c = contact_group(x, np.array([[0], [1], [2]]), np.array([False, False, False, True]), 0.1)
@@ -486,7 +497,7 @@ def test_the_response_pushes_an_isolated_pair_by_its_sweeps(sweeps: int) -> None
 def test_the_response_sweeps_while_pins_move() -> None:
     # One sweep while the pins stay; SWEEPS_MOVING in a frame whose pins were put elsewhere through
     # the API, and in every frame of a scene whose pins follow a track.
-    from clothsim.sim.passes.contact import MOVING
+    from clothsim.sim.passes.contactgroup import MOVING
 
     sim = Simulation(flag_scene(9, 6))
     meta = sim._kernel_args.contact.meta
@@ -527,7 +538,7 @@ def test_the_references_moved_point_by_point_hold_what_a_rebuild_from_them_would
     # force finds in it, once each, every ball must be no larger than brute force gives it, every
     # point must lie in its ball, and the cells must list every point, triangle and edge once, in
     # the cell of its reference position or of its box's lower corner.
-    from clothsim.sim.passes.contact import FLOOR, GAMMA, LOCALS, MOVED, REBUILDS, contact_group
+    from clothsim.sim.passes.contactgroup import FLOOR, GAMMA, LOCALS, MOVED, REBUILDS, contact_group
     from clothsim.sim.passes.nearby import key_of
 
     sim = Simulation(self_collision_scene(20))
@@ -589,7 +600,7 @@ def test_the_memory_check_counts_the_contact_modes_arrays_and_a_rebuilds_tables(
     import clothsim.scene as scene_module
     from clothsim.jit import CHUNKS
     from clothsim.sim.passes.celltables import box_table, corner_table, grid_over
-    from clothsim.sim.passes.contact import EDGE_SPLIT, GRID_CELLS, _element_boxes
+    from clothsim.sim.passes.contactsearch import EDGE_SPLIT, GRID_CELLS, _element_boxes
     from clothsim.sim.passes.nearby import extent
 
     sim = folded_cloth()

@@ -360,7 +360,7 @@ def test_bench_selfcollision_gives_the_contact_modes_rebuilds_and_their_cost() -
     # timed frames give the same numbers as plain ones; the rebuilds are the group's counter
     from clothsim.bench.selfcollision import measure
     from clothsim.bench.stress import StressRun
-    from clothsim.sim.passes.contact import REBUILDS
+    from clothsim.sim.passes.contactgroup import REBUILDS
 
     got = measure("selfCollision", "contact", 30, 30, 12)
     plain = StressRun("selfCollision", "contact", 12)

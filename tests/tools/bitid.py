@@ -7,6 +7,7 @@ same thing, bit for bit. Usage (from a checkout, with its own environment):
 
     python tests/tools/bitid.py > table.txt
     python tests/tools/bitid.py --compare table-a.txt table-b.txt   # rows equal / differing, per scene
+    python tests/tools/bitid.py --scenes flag heap --modes contact     # a subset
 
 A run that blows up prints a hash of its error message instead, so a change in where it blows up
 shows too.
@@ -95,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
                    help=f"frames per combination (default: {DEFAULT_FRAMES}, more for the scenes in FRAMES)")
     p.add_argument("--scenes", nargs="*", help="bundled scene names (default: every scenes/*.json)")
     p.add_argument("--integrators", nargs="*", help="integrator/damping pairs, e.g. implicit_euler/spec (default: all)")
+    p.add_argument("--modes", nargs="*", help="self-collision modes, e.g. contact (default: all)")
     args = p.parse_args(argv)
     if args.compare:
         return compare(*args.compare)
@@ -105,6 +107,8 @@ def main(argv: list[str] | None = None) -> int:
             if args.integrators and f"{integrator}/{damping}" not in args.integrators:
                 continue
             for mode in SELF_COLLISION_MODES:
+                if args.modes and mode not in args.modes:
+                    continue
                 t = time.perf_counter()
                 h = run(name, integrator, damping, mode, args.frames or FRAMES.get(name, DEFAULT_FRAMES))
                 print(f"{name:<14}{integrator + '/' + damping:<22}{mode:<6}{h}", flush=True)

@@ -19,7 +19,7 @@ import numpy as np
 
 from clothsim.scene import load_scene
 from clothsim.sim import Simulation
-from clothsim.sim.passes.contact import LOCALS, MOVED, REBUILDS
+from clothsim.sim.passes.contactgroup import LOCALS, MOVED, REBUILDS
 
 SCENES = Path(__file__).resolve().parents[2] / "scenes"
 

@@ -48,7 +48,7 @@ class StressResult:
 def measure(scene: str, mode: str, frames: int, every: int = 1, grid: int = DEFAULT_GRID) -> StressResult:
     """Run stress scene ``scene`` in self-collision ``mode`` for ``frames`` frames; count crossings
     after frames every, 2*every, ... and after the last."""
-    from ..sim.passes.contact import REBUILDS
+    from ..sim.passes.contactgroup import REBUILDS
     from ..sim.profile import FrameLaps
     from ..sim.solvers.frame import LAP_NAMES
 

@@ -26,8 +26,9 @@ from .passes.pins import move_pins
 from .passes.colliders.mesh import MeshGroup, collide_address
 from .passes.colliders.moving import top_speed
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
-from .passes.contact import DROPPED, MOVING, UNSAFE, any_outside, contact_group, response_reach, restore_reference, \
+from .passes.contactgroup import DROPPED, MOVING, UNSAFE, contact_group, response_reach, restore_reference, \
     snapshot_reference, with_more_room
+from .passes.contactreference import any_outside
 from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash
 
 #: The contact mode: a pass of its own (passes/contact.py), not a query of the hash.
@@ -527,7 +528,7 @@ class Simulation:
     def _contact_sweeps(self) -> None:
         # The contact response's strength for the frame: stronger while pins move (a pin track, or
         # pins put elsewhere through the API since the last frame), so the cloth makes way for them
-        # (see clothsim.sim.passes.contact.respond). Such a frame also starts from a fresh
+        # (see clothsim.sim.passes.contactresponse.respond). Such a frame also starts from a fresh
         # reference, as every frame did before the reference was kept (the stress set's twist, its
         # pins put elsewhere each frame, crossed itself without: 4 crossings at most on 16 x 16).
         # (A point the bound held back gets a new reference in the next substep.)

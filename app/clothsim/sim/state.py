@@ -133,7 +133,7 @@ class Corrections(NamedTuple):
     stretch_limit: float
     col: Colliders | None
     colliders: tuple
-    #: the contact mode's group (:class:`clothsim.sim.passes.contact.Contact`), run after Provot; None otherwise
+    #: the contact mode's group (:class:`clothsim.sim.passes.contactgroup.Contact`), run after Provot; None otherwise
     contact: tuple | None = None
     #: address of :func:`~clothsim.sim.passes.corrections.corrections_into` for this group's
     #: type, which the integrators' substep calls; 0 until known
@@ -155,5 +155,5 @@ class Plan(NamedTuple):
     #: the groups of the forces the scene uses (:mod:`clothsim.sim.passes.forces`), in registry order
     forces: tuple
     pins: PinMotion | None
-    #: the contact mode's group (:class:`clothsim.sim.passes.contact.Contact`)
+    #: the contact mode's group (:class:`clothsim.sim.passes.contactgroup.Contact`)
     contact: tuple | None = None

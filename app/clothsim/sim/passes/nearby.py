@@ -1,6 +1,6 @@
 """The cloth's points and its mesh's elements by the cell they lie in, kept up to date as single
 points move: what the contact pass reads to find again the pairs of a few points whose reference
-moved (:func:`~clothsim.sim.passes.contact.rereference`) without searching the whole cloth.
+moved (:func:`~clothsim.sim.passes.contactreference.rereference`) without searching the whole cloth.
 
 Three lists of cells: the points by their position, the triangles by the lower corner of their
 box widened by the query radius, the edges by the lower corner of their box widened by half of

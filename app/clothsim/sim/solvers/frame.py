@@ -55,8 +55,9 @@ from .verlet import verlet_one
 from ..clock import substep_time
 from ..passes.pins import offset_at, pin_chunk
 from ..passes.colliders.mesh import MeshGroup, collide_meshes_chunk, collide_types
-from ..passes.contact import CUT, FLAG, STALE, contact_bound, contact_joined, contact_search, contact_stale, \
-    fall_back, overflowed
+from ..passes.contact import contact_bound, contact_joined, contact_stale
+from ..passes.contactgroup import CUT, FLAG, STALE
+from ..passes.contactsearch import contact_search, fall_back, overflowed
 from ..passes.selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from ..state import Plan
 from ..team import ABORT, FAILED, START, TIMED, atomic_cas, barrier, roll_call, share

@@ -633,7 +633,7 @@ def _moving_tri_test(verts: np.ndarray, verts0: np.ndarray, tris: np.ndarray, fn
     px, py, pz, feature = closest_on_triangle(qx, qy, qz, ax, ay, az, bx, by, bz, cx, cy, cz)
     d2 = (qx - px) ** 2 + (qy - py) ** 2 + (qz - pz) ** 2
     # the closest point's weights on the corners (barycentric coordinates; the duplicate-code scan
-    # pairs these dot products, by shape alone, with contact.py's closest points of two segments)
+    # pairs these dot products, by shape alone, with contactdistance.py's closest points of two segments)
     e0x, e0y, e0z = bx - ax, by - ay, bz - az
     e1x, e1y, e1z = cx - ax, cy - ay, cz - az
     e2x, e2y, e2z = px - ax, py - ay, pz - az
