@@ -40,8 +40,9 @@ class ClothState(NamedTuple):
     #: addresses of the passes the thread team's member calls by address (``CALL_*`` of
     #: :mod:`clothsim.sim.solvers.frame`, filled in by its ``kernel_addresses``); zeros until known
     calls: np.ndarray
-    #: a mesh cloth's springs (:class:`clothsim.sim.passes.meshsprings.MeshSprings`; the grid's
-    #: streams and blocks are then empty); None for a grid cloth
+    #: a mesh cloth's listed springs, point masses and Provot springs
+    #: (:class:`clothsim.sim.passes.meshsprings.MeshSprings`; its springs of common offsets are the
+    #: streams above, and the blocks are empty); None for a grid cloth
     mesh: tuple | None = None
 
 
