@@ -5,7 +5,8 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NamedTuple
+from collections.abc import Iterator
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -122,3 +123,20 @@ def save_failure(name: str, actual: np.ndarray, expected: np.ndarray, folder: Pa
 
 def updating_goldens() -> bool:
     return os.environ.get(UPDATE_ENV, "") not in ("", "0")
+
+
+def golden_renderer() -> Iterator[Any]:
+    """A renderer at the goldens' size (a module-scoped fixture's body: ``pytest.fixture`` of it),
+    skipping where there is no OpenGL."""
+    import pytest
+
+    pytest.importorskip("moderngl")
+    from clothsim.errors import ClothsimError
+    from clothsim.render.renderer import Renderer
+
+    try:
+        r = Renderer(GOLDEN_SIZE, GOLDEN_SIZE)
+    except ClothsimError as exc:
+        pytest.skip(f"no OpenGL: {exc}")
+    yield r
+    r.release()

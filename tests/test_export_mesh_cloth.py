@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from conftest import error_line, run_cli
+from obj_support import parse_obj
 
 import clothsim
 from clothsim.cloth import cloth_surface
@@ -75,24 +76,6 @@ def positions_after(scene_file: Path, frames: int) -> np.ndarray:
     sim = clothsim.Simulation(clothsim.load_scene(scene_file))
     sim.step(frames)
     return sim.positions.copy()
-
-
-def parse_obj(path: Path) -> dict[str, dict[str, np.ndarray]]:
-    """Per object: v, vt, vn (float32) and f (F, k, 3) with 1-based global indices."""
-    objects: dict[str, dict[str, list]] = {}
-    current = None
-    for line in path.read_text(encoding="ascii").splitlines():
-        if not line or line.startswith("#"):
-            continue
-        tag, *rest = line.split()
-        if tag == "o":
-            current = objects.setdefault(rest[0], {"v": [], "vt": [], "vn": [], "f": []})
-        elif tag in ("v", "vt", "vn"):
-            current[tag].append([np.float32(x) for x in rest])
-        elif tag == "f":
-            current["f"].append([[int(i) for i in corner.split("/")] for corner in rest])
-    return {name: {k: np.array(v, dtype=np.int64 if k == "f" else np.float32) for k, v in o.items()}
-            for name, o in objects.items()}
 
 
 # -- geometry --------------------------------------------------------------------------------------

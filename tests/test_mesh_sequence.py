@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from obj_support import parse_obj
+
 from clothsim.meshsequence import frame_name
 from clothsim.objshapes import breathing_frames, bundled, sphere_obj
 from clothsim.resources import data_dir
@@ -242,17 +244,6 @@ def test_the_keys_of_a_sequence_name_the_field(keys, message):
     assert message in str(info.value), str(info.value)
 
 
-def _object_points(path: Path, name: str) -> np.ndarray:
-    """The ``v`` lines of object ``name`` in an OBJ file."""
-    points, inside = [], False
-    for line in path.read_text(encoding="ascii").splitlines():
-        if line.startswith("o "):
-            inside = line.split()[1] == name
-        elif inside and line.startswith("v "):
-            points.append([float(x) for x in line.split()[1:]])
-    return np.array(points)
-
-
 @pytest.mark.parametrize("fmt", ["obj", "usda"])
 def test_exports_carry_the_deforming_mesh_frame_by_frame(tmp_path, fmt):
     # the sphere grows 1 cm every 0.1 s (a frame of the sequence); frames 0, 9 and 18 at 90 a
@@ -265,7 +256,7 @@ def test_exports_carry_the_deforming_mesh_frame_by_frame(tmp_path, fmt):
     assert written == [0, 9, 18]
     for frame, radius in zip(written, (0.20, 0.21, 0.22)):
         if fmt == "obj":
-            points = _object_points(out / f"cloth_{frame:05d}.obj", "mesh_0")
+            points = parse_obj(out / f"cloth_{frame:05d}.obj")["mesh_0"]["v"].astype(np.float64)
         else:
             pytest.importorskip("pxr", reason="the usd extra (usd-core) is not installed")
             from pxr import Usd, UsdGeom

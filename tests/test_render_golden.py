@@ -16,24 +16,14 @@ import pytest
 
 pytest.importorskip("moderngl")
 
-from clothsim.errors import ClothsimError  # noqa: E402
 from clothsim.render.programs import read_source  # noqa: E402
 from clothsim.render.settings import SHADERS  # noqa: E402
 
-from render_support import (GOLDEN_DIR, GOLDEN_SIZE, draped_state, image_difference,  # noqa: E402
+from render_support import (GOLDEN_DIR, GOLDEN_SIZE, draped_state, golden_renderer, image_difference,  # noqa: E402
                             images_match, save_failure, updating_goldens)
 
 
-@pytest.fixture(scope="module")
-def renderer():
-    from clothsim.render.renderer import Renderer
-
-    try:
-        r = Renderer(GOLDEN_SIZE, GOLDEN_SIZE)
-    except ClothsimError as exc:
-        pytest.skip(f"no OpenGL: {exc}")
-    yield r
-    r.release()
+renderer = pytest.fixture(scope="module", name="renderer")(golden_renderer)
 
 
 @pytest.fixture(scope="module")

@@ -24,7 +24,7 @@ from clothsim.render.camera import cloth_size
 from clothsim.render.drawn import surface_geometry
 from clothsim.scene import Scene
 
-from render_support import GOLDEN_SIZE, draped_state, image_difference, images_match
+from render_support import GOLDEN_SIZE, draped_state, golden_renderer, image_difference, images_match
 
 
 # -- surfaces made by hand ---------------------------------------------------------------------
@@ -183,17 +183,7 @@ class SurfaceState:
         return self.springs
 
 
-@pytest.fixture(scope="module")
-def renderer():
-    pytest.importorskip("moderngl")
-    from clothsim.render.renderer import Renderer
-
-    try:
-        r = Renderer(GOLDEN_SIZE, GOLDEN_SIZE)
-    except ClothsimError as exc:
-        pytest.skip(f"no OpenGL: {exc}")
-    yield r
-    r.release()
+renderer = pytest.fixture(scope="module", name="renderer")(golden_renderer)
 
 
 @pytest.fixture(scope="module")
