@@ -171,4 +171,9 @@ def run_simulate(args: argparse.Namespace) -> int:
         print(f"clothsim: warning: self_collision \"contact\": in {sim.unsafe_substeps} substep"
               f"{'s' if sim.unsafe_substeps != 1 else ''} a pin moved farther than the bound allows; "
               f"the cloth may cross itself there ({sim.crossings()} crossings at the end)", file=sys.stderr)
+    if sim.squeezed_substeps:
+        print(f"clothsim: warning: self_collision \"contact\": in {sim.squeezed_substeps} substep"
+              f"{'s' if sim.squeezed_substeps != 1 else ''} a moving collider pressed the cloth thinner than the "
+              f"bound allows; the cloth may cross itself there ({sim.crossings()} crossings at the end)",
+              file=sys.stderr)
     return 0

@@ -38,6 +38,10 @@ class StressResult:
     #: where the frame's passes are not timed: the twist, whose pins are put through the API)
     rebuilds: int = 0
     search_ms: float | None = None
+    #: contact mode: substeps in which a pin moved, or a moving collider put a point, further than
+    #: the bound allows (Simulation.unsafe_substeps, Simulation.squeezed_substeps)
+    unsafe: int = 0
+    squeezed: int = 0
 
     @property
     def worst(self) -> tuple[int, int]:
@@ -71,6 +75,8 @@ def measure(scene: str, mode: str, frames: int, every: int = 1, grid: int = DEFA
             out.samples.append((f, run.crossings()))
     if contact is not None:
         out.rebuilds = int(run.sim._kernel_args.contact.meta[REBUILDS])
+        out.unsafe = run.sim.unsafe_substeps
+        out.squeezed = run.sim.squeezed_substeps
     if laps is not None:
         out.search_ms = laps.ns[LAP_NAMES.index("contact: search"), 0] * 1e-6
     return out
@@ -112,7 +118,10 @@ def run(args: argparse.Namespace) -> int:
             ms = f"{statistics.median(r.ms):.2f}" if r.ms else "-"
             frame, most = r.worst
             final = str(r.samples[-1][1]) if r.samples else "-"
-            note = f"blew up at frame {r.blew_up}" if r.blew_up is not None else ""
+            notes = [f"blew up at frame {r.blew_up}"] if r.blew_up is not None else []
+            notes += [f"{n} substeps {what}" for n, what in ((r.unsafe, "unsafe (pins)"), (r.squeezed, "squeezed"))
+                      if n]
+            note = "; ".join(notes)
             done = max(len(r.ms), 1)
             per_frame = f"{r.rebuilds / done:.2f}" if mode == "contact" else "-"
             per_rebuild = f"{r.search_ms / r.rebuilds:.2f}" if r.search_ms is not None and r.rebuilds else "-"
@@ -121,5 +130,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"{args.grid}x{args.grid} points, {args.frames} frames; ms/frame = median over frames; crossings "
           f"(edges through triangles they share no point with) counted every {args.every} frames and after the "
           "last; final = the last count before the end or a blow-up; contact: whole rebuilds of its reference a "
-          "frame, and the ms of a rebuild's search (the twist's passes are not timed)")
+          "frame, and the ms of a rebuild's search (the twist's passes are not timed); the substeps in which a pin "
+          "moved (unsafe) or a moving collider put a point (squeezed) further than its bound allows")
     return 0

@@ -27,6 +27,13 @@ presses it until 1.2 s:
 - ``drag``: no collider but the floor: two corners of the cloth are dragged over it to the far
   side and lifted, folding it onto itself.
 
+And one where two colliders close on the cloth further than its layers allow (``SQUEEZE_SCENES``):
+
+- ``squeeze``: as ``lid``, but the plane comes down to 5 mm over the floor, on a heap of layers
+  each of which keeps the contact distance (9.5 mm at 50 x 50) from the next. Something has to
+  give: in the contact mode the colliders keep the cloth between them and the cloth crosses
+  itself there, in substeps that are counted (``Simulation.squeezed_substeps``).
+
 A bundled scene on another grid keeps its pins where they were (each new point is pinned when the
 nearest point of the scene's own grid is) and its thickness in proportion to the point spacing,
 so every size has the same neighbours per point in the self-collision hash.
@@ -45,8 +52,12 @@ from ..scene import SIMULATION, SELF_COLLISION_MODES, Scene, load_scene
 FOLDING_SCENES = ("selfCollision", "flag", "heap", "push", "twist")
 #: The runs where moving colliders and pins drive the folds (see the module's docstring).
 DRIVEN_SCENES = ("lid", "press", "roller", "stamp", "drag")
+#: The runs where colliders squeeze the cloth thinner than it can be (see the module's docstring).
+SQUEEZE_SCENES = ("squeeze",)
 #: Every run of the stress set, in the order the benchmark prints them.
-STRESS_SCENES = FOLDING_SCENES + DRIVEN_SCENES
+STRESS_SCENES = FOLDING_SCENES + DRIVEN_SCENES + SQUEEZE_SCENES
+#: The squeeze's gap between the plane and the floor at the end (m).
+SQUEEZE_GAP = 0.005
 #: The driven runs' floor: the cloth starts 5 cm over it, at the course's height of 1 m.
 FLOOR = 0.95
 #: The twist: seconds before the edges start turning, seconds to turn, turns of each edge, and the
@@ -93,14 +104,21 @@ def _keyframes(start: list[float], end: list[float], t0: float = 0.15, t1: float
 
 
 def driven_scene(name: str, n: int = 50) -> Scene:
-    """The driven run ``name`` (one of ``DRIVEN_SCENES``) on an ``n`` x ``n`` grid: the course's
-    1 m cloth, 5 cm over a floor, its thickness in proportion to the point spacing (0.0095 at
-    50 x 50)."""
-    from ..resources import data_dir
+    """The driven run ``name`` as a scene (see :func:`driven_scene_data`)."""
     from ..scene import scene_from_dict
 
-    if name not in DRIVEN_SCENES:
-        raise ValueError(f"unknown driven run {name!r} (expected one of: {', '.join(DRIVEN_SCENES)})")
+    return scene_from_dict(driven_scene_data(name, n), f"<{name}>")
+
+
+def driven_scene_data(name: str, n: int = 50) -> dict:
+    """The driven run ``name`` (one of ``DRIVEN_SCENES`` or ``SQUEEZE_SCENES``) on an ``n`` x ``n``
+    grid: the course's 1 m cloth, 5 cm over a floor, its thickness in proportion to the point
+    spacing (0.0095 at 50 x 50), as a scene file's JSON object."""
+    from ..resources import data_dir
+
+    runs = DRIVEN_SCENES + SQUEEZE_SCENES
+    if name not in runs:
+        raise ValueError(f"unknown driven run {name!r} (expected one of: {', '.join(runs)})")
     cloth = {"width": 1.0, "height": 1.0, "num_width_points": n, "num_height_points": n,
              "thickness": 0.0095 * 49 / (n - 1), "orientation": "horizontal", "damping": 0.2, "density": 150.0,
              "ks": 5000.0}
@@ -110,10 +128,11 @@ def driven_scene(name: str, n: int = 50) -> Scene:
     # the box reaches into the floor: a point it meets is pushed out of its front, never under it
     heap = {"center": [-0.08, y + 0.02, 0.5], "half_extents": [0.05, 0.1, 0.7], "friction": 0.3,
             "motion": _keyframes([-0.08, y + 0.02, 0.5], [0.55, y + 0.02, 0.5], t1=0.8)}
-    if name == "lid":
+    if name in ("lid", "squeeze"):
+        gap = 0.03 if name == "lid" else SQUEEZE_GAP
         data["box"] = heap
         data["plane"] = [floor, {"point": [0.5, y + 0.4, 0.5], "normal": [0.0, -1.0, 0.0], "friction": 0.5,
-                                 "motion": _keyframes([0.5, y + 0.4, 0.5], [0.5, y + 0.03, 0.5], 0.8, 1.2)}]
+                                 "motion": _keyframes([0.5, y + 0.4, 0.5], [0.5, y + gap, 0.5], 0.8, 1.2)}]
     elif name == "press":
         data["box"] = heap
         data["sphere"] = {"origin": [0.72, y + 0.6, 0.5], "radius": 0.25, "friction": 0.5,
@@ -131,7 +150,7 @@ def driven_scene(name: str, n: int = 50) -> Scene:
         cloth["pinned"] = [[0, 0], [n - 1, 0]]
         cloth["pin_motion"] = {"keyframes": [[0.0, [0.0, 0.0, 0.0]], [0.15, [0.0, 0.0, 0.0]],
                                              [0.9, [0.0, 0.0, 0.85]], [1.2, [0.0, 0.25, 0.85]]]}
-    return scene_from_dict(data, f"<{name}>")
+    return data
 
 
 def twist_pose(rest: np.ndarray, top: np.ndarray, t: float, seconds: float = TWIST_SECONDS) -> np.ndarray:
@@ -171,7 +190,7 @@ class StressRun:
         self.mode = mode
         if name == "twist":
             scene = twist_scene(n)
-        elif name in DRIVEN_SCENES:
+        elif name in DRIVEN_SCENES + SQUEEZE_SCENES:
             scene = driven_scene(name, n)
         else:
             scene = resized(load_scene(name), n)

@@ -26,8 +26,8 @@ from .passes.pins import move_pins
 from .passes.colliders.mesh import MeshGroup, collide_address
 from .passes.colliders.moving import top_speed
 from .passes.selfcollide import MODE_GRID, MODE_SPEC, slot_copies, spec_table_size, table_size
-from .passes.contactgroup import DROPPED, MOVING, UNSAFE, contact_group, response_reach, restore_reference, \
-    snapshot_reference, with_more_room
+from .passes.contactgroup import DROPPED, MOVING, SQUEEZED, UNSAFE, contact_group, response_reach, \
+    restore_reference, snapshot_reference, with_more_room
 from .passes.contactreference import any_outside
 from .state import ClothState, Colliders, GridHash, PinMotion, Plan, SpecHash
 
@@ -213,6 +213,16 @@ class Simulation:
         (:meth:`crossings` says whether it did). Always 0 in the other modes."""
         contact = self._kernel_args.contact
         return 0 if contact is None else int(contact.meta[UNSAFE])
+
+    @property
+    def squeezed_substeps(self) -> int:
+        """Substeps so far in which the contact self-collision mode let a moving collider put a
+        point of the cloth further than its bound allows (a collider squeezing the cloth thinner than
+        it can be, against another collider or against more of the cloth): the collider keeps the
+        point out of itself, and the cloth may have crossed itself there (:meth:`crossings` says
+        whether it did). Always 0 in the other modes and in scenes whose colliders do not move."""
+        contact = self._kernel_args.contact
+        return 0 if contact is None else int(contact.meta[SQUEEZED])
 
     @property
     def dt(self) -> float:

@@ -27,7 +27,10 @@ distance d each move less than d/2. In each substep:
 3. (after Provot) every free point is projected into its ball: on the segment from its
    reference, so a point that a convex collider left outside stays outside when its reference
    is outside too. Pinned points are never moved; their balls are
-   checked in step 1 like every other point's.
+   checked in step 1 like every other point's. In a scene whose colliders move, the collider
+   pass then runs again (a moving collider may have passed over a point's reference): a point it
+   puts out of its ball is counted as a squeezed substep
+   (:func:`~.contactresponse.left_balls`).
 
 The broad phase is a dense grid of cells over the cloth's extent (:mod:`.celltables`), built at
 a rebuild only (:func:`~.contactsearch.rebuild` has the rule): the triangles' boxes, widened by the query radius,

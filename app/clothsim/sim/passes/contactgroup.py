@@ -60,16 +60,18 @@ LOCAL_SHARE = 1.0 / 128.0
 
 # meta fields (MOVING: 1 in a frame whose pins move, set by the simulation; CLAMPED: 1 when the
 # bound has moved a point since its reference was set; REBUILDS counts the whole rebuilds, LOCALS
-# the substeps that moved some points' references, MOVED those points)
-VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE, MOVING, CLAMPED, LOCALS, MOVED = range(10)
-META = 10
+# the substeps that moved some points' references, MOVED those points; SQUEEZED counts the substeps
+# in which a moving collider put a point out of its ball after the bound, SQUEEZING is 1 in such a
+# substep until it is counted: see contactresponse.left_balls)
+VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE, MOVING, CLAMPED, LOCALS, MOVED, SQUEEZING, SQUEEZED = range(12)
+META = 12
 
 
 class Contact(NamedTuple):
     """The contact pass's arrays: the mesh (triangles (3, T), edges (2, E)), the movable mask, the
     reference state (3, N) and each point's squared ball radius, the stored pairs (point-triangle:
     indices (2, P) and weights + normal (6, P); edge-edge: indices (2, Q) and parameters + normal
-    (5, Q)), the Jacobi sums, ``meta`` counters (see VALID ... UNSAFE), a rebuild's work space
+    (5, Q)), the Jacobi sums, ``meta`` counters (see VALID ... SQUEEZED), a rebuild's work space
     (each member's bounds on the balls, each part's pairs found and cost, see :func:`search`), the
     points by cell and the elements by point (for :func:`rereference`), the contact distance,
     the query radius and the broad phase's cell edge."""

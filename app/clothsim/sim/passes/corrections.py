@@ -19,6 +19,7 @@ from .meshsprings import mesh_limit
 from .colliders import SET_REACHABLE
 from .selfcollide import self_collide
 from .contact import contact_bound, contact_respond
+from .contactresponse import count_squeezed, left_balls
 from ..state import Corrections
 
 
@@ -43,6 +44,7 @@ def corrections(pos: np.ndarray, last: np.ndarray, free: np.ndarray, blocks: np.
         if not mesh_limit(pos, post.pinned, post.mesh, post.stretch_limit, 0, CHUNKS, True):
             provot(pos, post.pinned, blocks, rest, nw, post.stretch_limit)
     contact_group(pos, last, post.contact, False)
+    collide_again(pos, last, post.contact, post.col, post.colliders, substep, scratch)
     return skipped
 
 
@@ -78,6 +80,20 @@ def contact_group(pos: np.ndarray, last: np.ndarray, contact: tuple | None, resp
         contact_respond(pos, last, contact)
     else:
         contact_bound(pos, contact)
+
+
+@njit(**EXACT)
+def collide_again(pos: np.ndarray, last: np.ndarray, contact: tuple | None, col: tuple | None, at: int, substep: int,
+                  scratch: np.ndarray) -> None:
+    """In the contact mode, when a collider moves: the collider pass again, after the bound, and
+    the substep counted when it put a point out of its ball (see
+    :func:`~clothsim.sim.passes.contactresponse.left_balls`); pruned when either is off."""
+    if contact is None or col is None:
+        return
+    if col.moving:
+        collide_group(pos, last, col, at, substep, scratch)
+        left_balls(pos, contact, col.free, 0, CHUNKS)
+        count_squeezed(contact)
 
 
 def has_corrections(post: Corrections) -> bool:

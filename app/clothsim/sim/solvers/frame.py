@@ -57,6 +57,7 @@ from ..passes.pins import offset_at, pin_chunk
 from ..passes.colliders.mesh import MeshGroup, collide_meshes_chunk, collide_types
 from ..passes.contact import contact_bound, contact_joined, contact_stale
 from ..passes.contactgroup import CUT, FLAG, STALE
+from ..passes.contactresponse import count_squeezed, left_balls
 from ..passes.contactsearch import contact_search, fall_back, overflowed
 from ..passes.selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from ..state import Plan
@@ -306,6 +307,20 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 gen = barrier(sync, size, gen, np.int64(LAP_BOUND))
                 if gen < 0:
                     return
+                if col is not None and colliding and col.moving:
+                    # a moving collider has the last word (contactresponse.left_balls); its time
+                    # goes to the colliders' lap
+                    lo, hi = share(CHUNKS, member, size)
+                    if call_native(col.sets[SET_COLLIDE], (colliders_at, col.calls, pos, last, col.free, box,
+                                                           col.offset, own, np.int64(lo), np.int64(hi), skipped,
+                                                           type_ref(None))) != 0:
+                        raise MemoryError("the collider pass could not allocate its reach flags")
+                    left_balls(pos, contact, col.free, lo, hi)
+                    gen = barrier(sync, size, gen, np.int64(LAP_COLLIDE))
+                    if gen < 0:
+                        return
+                    if member == 0:
+                        count_squeezed(contact)
 
 
 @lru_cache(maxsize=None)
