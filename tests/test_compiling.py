@@ -381,3 +381,17 @@ def test_the_notice_estimates_a_triangle_mesh_scene(monkeypatch: pytest.MonkeyPa
     monkeypatch.setattr(watch, "_installed", notice)
     clothsim.Simulation(clothsim.load_scene(name))
     assert notice.estimate == watch.MESH_FIRST_RUN_SECONDS >= 2 * watch.FIRST_RUN_SECONDS
+
+
+@pytest.mark.parametrize("name", ["skirt", "drum"])
+def test_the_notice_estimates_a_contact_scene_with_a_triangle_mesh(monkeypatch: pytest.MonkeyPatch, name: str) -> None:
+    # both: the contact mode's kernels and a mesh's passes
+    import io
+
+    import clothsim
+    from clothsim.jit import watch
+
+    notice = watch.CompileNotice(io.StringIO())
+    monkeypatch.setattr(watch, "_installed", notice)
+    clothsim.Simulation(clothsim.load_scene(name))
+    assert notice.estimate == watch.CONTACT_MESH_FIRST_RUN_SECONDS > watch.CONTACT_FIRST_RUN_SECONDS

@@ -70,10 +70,11 @@ def warm_side_kernels(beside: bool | None = None) -> None:
 
 
 def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], None],
-                      also: tuple[tuple[Any, tuple], ...] = ()) -> None:
-    """Compile ``dispatcher`` for ``argtypes``, then each (dispatcher, argtypes) of ``also``, into
-    the on-disk cache in a second process while ``meanwhile()`` compiles the rest here; the caller
-    then loads them from the cache (``also`` is for sharing the work out evenly).
+                      also: tuple[tuple[Any, tuple], ...] = (), before: tuple[tuple[Any, tuple], ...] = ()) -> None:
+    """Compile each (dispatcher, argtypes) of ``before``, then ``dispatcher`` for ``argtypes``, then
+    each of ``also``, into the on-disk cache in a second process while ``meanwhile()`` compiles the
+    rest here; the caller then loads them from the cache (``also`` and ``before`` are for sharing
+    the work out evenly: ``before`` holds callees that ``meanwhile`` reaches last, by then cached).
 
     Numba compiles one function at a time per process (a global lock), so a cold start on two
     cores otherwise leaves one idle. (A fork of this process, which skips the 0.7 s import, was
@@ -91,7 +92,8 @@ def compile_elsewhere(dispatcher: Any, argtypes: tuple, meanwhile: Callable[[], 
     try:
         child = subprocess.Popen([sys.executable, "-c", _CHILD], stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                  stderr=subprocess.DEVNULL)
-        jobs = [(d.py_func.__module__, d.py_func.__name__, types) for d, types in ((dispatcher, argtypes), *also)]
+        jobs = [(d.py_func.__module__, d.py_func.__name__, types) for d, types in (*before, (dispatcher, argtypes),
+                                                                                     *also)]
         child.stdin.write(pickle.dumps(jobs))
         child.stdin.close()
     except OSError:

@@ -62,10 +62,14 @@ class Simulation:
         self.scene = scene
         if scene.simulation.self_collision == "contact" or scene.meshes or scene.cloth.is_mesh:
             # said before the first kernel compiles (the collider plan below may compile one)
-            from ..jit.watch import CONTACT_FIRST_RUN_SECONDS, MESH_FIRST_RUN_SECONDS, expect
+            from ..jit.watch import CONTACT_FIRST_RUN_SECONDS, CONTACT_MESH_FIRST_RUN_SECONDS, MESH_FIRST_RUN_SECONDS, \
+                expect
 
-            contact = scene.simulation.self_collision == "contact"
-            expect(CONTACT_FIRST_RUN_SECONDS if contact else MESH_FIRST_RUN_SECONDS)
+            mesh = bool(scene.meshes) or scene.cloth.is_mesh
+            if scene.simulation.self_collision == "contact":
+                expect(CONTACT_MESH_FIRST_RUN_SECONDS if mesh else CONTACT_FIRST_RUN_SECONDS)
+            else:
+                expect(MESH_FIRST_RUN_SECONDS)
         cloth = scene.cloth
         # the grid's size (0 x 0 for a mesh cloth, whose surface is :attr:`surface`)
         self.nw = cloth.num_width_points
@@ -557,8 +561,12 @@ class Simulation:
 
     def _check_crossings(self) -> None:
         # once per start: the contact mode keeps a cloth from crossing itself, but cannot undo
-        # crossings it is given (positions set through the API)
+        # crossings it is given (positions set through the API). A grid where the scene puts it
+        # has none (a flat grid, or one within its 1 mm jitter of flat: its triangles' shadows on
+        # its plane do not overlap), so its first run does not compile the count for nothing.
         self._crossings_checked = True
+        if self.scene.cloth.mesh is None and np.array_equal(self._pos, self.initial_positions.T):
+            return
         found = self.crossings()
         if found:
             import warnings

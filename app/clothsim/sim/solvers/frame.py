@@ -56,6 +56,7 @@ from ..clock import substep_time
 from ..passes.pins import offset_at, pin_chunk
 from ..passes.colliders.mesh import MeshGroup, collide_meshes_chunk, collide_types
 from ..passes.contact import contact_bound, contact_joined, contact_stale
+from ..passes.contactreference import rereference
 from ..passes.contactgroup import CUT, FLAG, STALE
 from ..passes.contactresponse import count_squeezed, left_balls
 from ..passes.contactsearch import contact_search, fall_back, overflowed
@@ -366,19 +367,25 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
     launch = (i64, i64, i64, i64, sync, i64, i64)
 
     contact = None
+    moves = ()
     if groups.contact != types.none:
         pos, last = st.types[st.fields.index("pos")], st.types[st.fields.index("last")]
         flag = types.Array(types.int64, 1, "C")
         contact = ((contact_joined, (pos, last, groups.contact, flag)), (contact_bound, (pos, groups.contact)),
                    (contact_stale, (pos, last, groups.contact, flag, i64, i64)),
                    (contact_search, (last, groups.contact, flag, i64)))
+        # the moves of a few references (about 15 s cold, a third of the mode's kernels) are a
+        # callee of the first: compiled in the second process first, and loaded from the cache
+        # when this one compiles the first, last
+        moves = ((rereference, (pos, last, groups.contact)),)
 
     # A cold start's two processes: the second compiles the member (5-9 s cold) and the mesh
     # pass (8-9 s) or else the set's two kernels (3 s), and the side kernels registered to go
     # beside (the renderer's overlap test); this one the rest (the kinds' passes 3-6 s, the
     # shared passes, the launchers, the other side kernels).
     beside = (*(((collide_meshes_chunk, collide),) if collide is not None else sets), *side_kernels_beside())
-    here = (*(contact or ()), *(kernel for row in kinds for kernel in row), *(sets if collide is not None else ()))
+    here = (*(contact[1:] if contact else ()), *(kernel for row in kinds for kernel in row),
+            *(sets if collide is not None else ()))
 
     def meanwhile() -> None:
         _shared_addresses(st)
@@ -389,9 +396,11 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
         _enter.compile(enter)
         _launch.compile(launch)
         warm_side_kernels(beside=False)
+        if contact:
+            contact[0][0].compile(contact[0][1])
 
     with compiling_alone(_member, member):
-        compile_elsewhere(_member, member, meanwhile, beside)
+        compile_elsewhere(_member, member, meanwhile, beside, moves)
         warm_side_kernels(beside=True)  # loaded from what the second process compiled (if any)
         # (compiled here, on one core or when the second process failed)
         calls = (*_shared_addresses(st), *((native_address(*c) for c in contact) if contact else (0,) * 4))
