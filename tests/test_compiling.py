@@ -366,7 +366,7 @@ def test_the_notice_estimates_the_compile_of_the_mode_a_run_uses(monkeypatch: py
     scene = clothsim.load_scene("selfCollision")
     clothsim.Simulation(scene.with_simulation(self_collision=mode))
     assert notice.estimate == getattr(watch, expected)
-    assert watch.CONTACT_FIRST_RUN_SECONDS > 3 * watch.FIRST_RUN_SECONDS
+    assert watch.CONTACT_FIRST_RUN_SECONDS > 2 * watch.FIRST_RUN_SECONDS
 
 
 @pytest.mark.parametrize("name", ["mesh", "cape"])

@@ -47,6 +47,13 @@ EXACT = {"cache": True, "error_model": "numpy", "fastmath": False}
 #: callee of such a kernel that takes arrays must be BORROWED too.
 BORROWED = {**EXACT, "_nrt": False}
 
+#: Added to a kernel's options when only compiled code calls it (by address, or as a callee):
+#: Numba then makes no Python entry point and no C callback for it. For a kernel that takes the
+#: contact mode's group (some 40 arrays) the Python entry point, which unpacks every array, was most
+#: of its compile: 0.43-0.58 s against 0.08-0.12 s for an eight-line loop over the points. Calling
+#: such a kernel from Python crashes the interpreter, so only kernels no Python code calls take it.
+INNER = {"no_cpython_wrapper": True, "no_cfunc_wrapper": True}
+
 #: KERNEL split over the cores with ``prange``; such kernels keep every output element a
 #: function of its own inputs, so results do not depend on the number of threads.
 PARALLEL = {**KERNEL, "parallel": True}

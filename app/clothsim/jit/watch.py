@@ -21,8 +21,8 @@ FIRST_RUN_SECONDS = 10
 #: The same for a scene in the contact self-collision mode, whose kernels take most of it
 #: (``clothsim bench compile --commands contact``), and for one that also has a triangle mesh
 #: (the bundled ``skirt`` and ``drum`` scenes' cold starts, docs/performance-compile.md).
-CONTACT_FIRST_RUN_SECONDS = 35
-CONTACT_MESH_FIRST_RUN_SECONDS = 50
+CONTACT_FIRST_RUN_SECONDS = 30
+CONTACT_MESH_FIRST_RUN_SECONDS = 45
 #: The same for a scene with a triangle mesh, as a collider or as the cloth, whose passes and
 #: plans are their own (the bundled ``mesh`` and ``cape`` scenes' cold starts, docs/performance-compile.md).
 MESH_FIRST_RUN_SECONDS = 30

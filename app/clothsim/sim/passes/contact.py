@@ -55,7 +55,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...jit import EXACT, KERNEL
+from ...jit import EXACT, INNER, KERNEL
 from ..team import share
 from .contactgroup import CALLS, CUT, END, FIRST, FLAG, LOCAL_SHARE, PARTS, SIZE, STALE, UNSAFE, VALID, Contact
 from .contactreference import _leaving, _outside, rereference
@@ -63,7 +63,7 @@ from .contactresponse import bound, respond
 from .contactsearch import _ONE, _ZERO, _search_alone, join
 
 
-@njit(**KERNEL)
+@njit(**KERNEL, **INNER)
 def _stale(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray) -> bool:
     """True when the substep that started at ``last`` needs a whole new reference: there is none,
     a point has left its ball, or more than ``LOCAL_SHARE`` of the points are about to (fewer have
@@ -76,7 +76,7 @@ def _stale(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray) -> b
     return flag[CALLS] > most
 
 
-@njit(**KERNEL)
+@njit(**KERNEL, **INNER)
 def _rebuilt(pos: np.ndarray, c: Contact) -> None:
     # a pinned point that moved further than its ball in this one substep: the bound cannot hold
     # for its pairs (the pin's motion is prescribed); counted, not hidden
@@ -131,7 +131,7 @@ def contact_stale(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarra
         flag[CUT] = PARTS
 
 
-@njit(**EXACT)
+@njit(**EXACT, **INNER)
 def contact_joined(pos: np.ndarray, last: np.ndarray, c: Contact, flag: np.ndarray) -> None:
     """The first member's end of the first half: the rebuild's parts joined (when ``flag`` says
     it is stale), or else the references of the points about to leave their balls moved, then
@@ -156,7 +156,7 @@ def contact_respond(pos: np.ndarray, last: np.ndarray, c: Contact) -> None:
     contact_joined(pos, last, c, flag)
 
 
-@njit(**EXACT)
+@njit(**EXACT, **INNER)
 def contact_bound(pos: np.ndarray, c: Contact) -> None:
     """The second half, last in the substep: every free point into its ball."""
     bound(pos, c)

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...jit import BORROWED, EXACT, KERNEL
+from ...jit import BORROWED, EXACT, INNER, KERNEL
 from .contactgroup import CLAMPED, DROPPED, FLOOR, GAMMA, LOCALS, MOVED, N_EE, N_PT, ROOMY, VALID, Contact
 from .contactsearch import BATCH, Batch, _add_pair, _tested_ee, _tested_pt, new_batch
 from .nearby import box_key, element_box, extent, key_of, listed_in, relist
@@ -26,7 +26,7 @@ def _leaves(x: np.ndarray, c: Contact, p: int, roomy: float) -> bool:
     return dx * dx + dy * dy + dz * dz > c.rho2[p]
 
 
-@njit(**KERNEL)
+@njit(**KERNEL, **INNER)
 def _leaving(x: np.ndarray, c: Contact, most: int) -> int:
     """How many points of ``x`` call for a new reference (they are :func:`_leaves`, or the bound has
     held them back since their reference was set), counted up to ``most`` + 1."""
@@ -47,7 +47,7 @@ OUTSIDE_REL = 1e-6
 OUTSIDE_ABS = 1e-28
 
 
-@njit(**KERNEL)
+@njit(**KERNEL, **INNER)
 def _outside(x: np.ndarray, c: Contact) -> bool:
     """True when a point of ``x`` lies outside its ball (see OUTSIDE_REL)."""
     ref = c.ref
@@ -74,7 +74,7 @@ def any_outside(x: np.ndarray, c: Contact, points: np.ndarray) -> bool:
 # a few points' references moved
 
 
-@njit(**EXACT)
+@njit(**EXACT, **INNER)
 def rereference(pos: np.ndarray, last: np.ndarray, c: Contact) -> bool:
     """Move the reference of each point about to leave its ball (:func:`_leaves`, in ``pos``) or
     held back by the bound since its reference was set to where it started the substep
@@ -94,7 +94,7 @@ def rereference(pos: np.ndarray, last: np.ndarray, c: Contact) -> bool:
     return _rereference(pos, last, c, c.dmins[0], new_batch())
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _rereference(pos: np.ndarray, last: np.ndarray, c: Contact, dmin: np.ndarray, batch: Batch) -> bool:
     nb = c.near
     roomy = (ROOMY * GAMMA * c.radius) ** 2
@@ -137,7 +137,7 @@ def _rereference(pos: np.ndarray, last: np.ndarray, c: Contact, dmin: np.ndarray
     return True
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _move_round(last: np.ndarray, c: Contact, lo: int, hi: int, now: int) -> None:
     # the round's points (todo[lo:hi]) to their starting positions, marked and listed in their
     # cells; the elements they belong to marked, their boxes and cells made the new reference's
@@ -169,7 +169,7 @@ def _move_round(last: np.ndarray, c: Contact, lo: int, hi: int, now: int) -> Non
                 nb.ext[1] = max(nb.ext[1], extent(nb.edge_box, e))
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _drop_pt(c: Contact, npt: int, now: int) -> int:
     # the stored point-triangle pairs the round's points belong to taken out, the others kept in order
     nb = c.near
@@ -180,7 +180,7 @@ def _drop_pt(c: Contact, npt: int, now: int) -> int:
     return kept
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _drop_ee(c: Contact, nee: int, now: int) -> int:
     # (as _drop_pt, for the edge-edge pairs)
     nb = c.near
@@ -230,7 +230,7 @@ def _union(box: np.ndarray, ids: np.ndarray, first: int, end: int, mark: np.ndar
     return lox, loy, loz, hix, hiy, hiz
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: int, nee: int,
                  batch: Batch) -> tuple[int, int]:
     # every pair the round's points (todo[lo:hi]) belong to, with the boxes and the exact tests
@@ -346,7 +346,7 @@ def _round_pairs(c: Contact, lo: int, hi: int, now: int, dmin: np.ndarray, npt: 
     return npt, nee
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _round_balls(last: np.ndarray, c: Contact, lo: int, hi: int, now: int, moving: int, dmin: np.ndarray) -> int:
     # the round's points' new balls; every other point's ball shrunk to a nearer new pair, and a
     # point not yet moved whose start is then outside its ball put on the list for the next round

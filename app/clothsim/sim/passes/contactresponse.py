@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...jit import BORROWED, CHUNKS, KERNEL
+from ...jit import BORROWED, CHUNKS, INNER, KERNEL
 from ..team import share
 from .contactgroup import CLAMPED, FRICTION, MOVING, N_EE, N_PT, PUSH, PUSH_MOVING, SQUEEZED, SQUEEZING, \
     SWEEPS_MOVING, Contact
@@ -76,7 +76,7 @@ def respond(pos: np.ndarray, last: np.ndarray, c: Contact) -> None:
     _sweeps(pos, last, c, np.empty(4, dtype=np.int64), np.empty(4))
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _sweeps(pos: np.ndarray, last: np.ndarray, c: Contact, ids: np.ndarray, coef: np.ndarray) -> None:
     # Apart from respond, which makes the scratch: compiled without reference counting, since
     # handing the group to the inlined per-pair response counted every one of its arrays up and
@@ -94,31 +94,37 @@ def sweep(pos: np.ndarray, last: np.ndarray, c: Contact, ids: np.ndarray, coef: 
     h = c.thickness
     tris = c.tris
     edges = c.edges
-    for k in range(c.meta[N_PT]):
-        t = c.pt[1, k]
-        ids[0] = c.pt[0, k]
-        ids[1] = tris[0, t]
-        ids[2] = tris[1, t]
-        ids[3] = tris[2, t]
-        coef[0] = 1.0
-        coef[1] = -c.ptf[0, k]
-        coef[2] = -c.ptf[1, k]
-        coef[3] = -c.ptf[2, k]
-        _respond(pos, last, c, ids, coef, c.ptf[3, k], c.ptf[4, k], c.ptf[5, k], h, push)
-    for k in range(c.meta[N_EE]):
-        e1 = c.ee[0, k]
-        e2 = c.ee[1, k]
-        u = c.eef[0, k]
-        v = c.eef[1, k]
-        ids[0] = edges[0, e1]
-        ids[1] = edges[1, e1]
-        ids[2] = edges[0, e2]
-        ids[3] = edges[1, e2]
-        coef[0] = 1.0 - u
-        coef[1] = u
-        coef[2] = v - 1.0
-        coef[3] = -v
-        _respond(pos, last, c, ids, coef, c.eef[2, k], c.eef[3, k], c.eef[4, k], h, push)
+    npt = c.meta[N_PT]
+    # the point-triangle pairs, then the edge-edge pairs, through one inlined response (two
+    # copies of it were a second of the first run's compile)
+    for j in range(npt + c.meta[N_EE]):
+        if j < npt:
+            t = c.pt[1, j]
+            ids[0] = c.pt[0, j]
+            ids[1] = tris[0, t]
+            ids[2] = tris[1, t]
+            ids[3] = tris[2, t]
+            coef[0] = 1.0
+            coef[1] = -c.ptf[0, j]
+            coef[2] = -c.ptf[1, j]
+            coef[3] = -c.ptf[2, j]
+            nx, ny, nz = c.ptf[3, j], c.ptf[4, j], c.ptf[5, j]
+        else:
+            k = j - npt
+            e1 = c.ee[0, k]
+            e2 = c.ee[1, k]
+            u = c.eef[0, k]
+            v = c.eef[1, k]
+            ids[0] = edges[0, e1]
+            ids[1] = edges[1, e1]
+            ids[2] = edges[0, e2]
+            ids[3] = edges[1, e2]
+            coef[0] = 1.0 - u
+            coef[1] = u
+            coef[2] = v - 1.0
+            coef[3] = -v
+            nx, ny, nz = c.eef[2, k], c.eef[3, k], c.eef[4, k]
+        _respond(pos, last, c, ids, coef, nx, ny, nz, h, push)
     for p in range(pos.shape[1]):
         m = c.cnt[p]
         if m > 0:

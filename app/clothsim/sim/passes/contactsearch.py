@@ -9,7 +9,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from ...jit import BORROWED, EXACT, KERNEL
+from ...jit import BORROWED, EXACT, INNER, KERNEL
 from ..team import share
 from .celltables import box_table, cell_at, corner_table, grid_over, index_of
 from .contactdistance import NO_LENGTH, closest_on_segments, closest_on_triangle
@@ -171,13 +171,13 @@ class Batch(NamedTuple):
     pairs: np.ndarray
 
 
-@njit(**EXACT)
+@njit(**EXACT, **INNER)
 def new_batch() -> Batch:
     """An empty :class:`Batch`."""
     return Batch(np.empty(12 * BATCH), np.empty(7 * BATCH), np.empty(2 * BATCH, dtype=np.int64))
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _segments_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
     """:func:`closest_on_segments` and the distance of each of the first ``n`` pairs of a batch,
     without branches (every case computed, the one that applies kept): the loop runs over several
@@ -212,7 +212,7 @@ def _segments_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
         out[_DEG * BATCH + k] = 1.0 if (a <= NO_LENGTH) | (e <= NO_LENGTH) else 0.0
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _settle_ee(x: np.ndarray, c: Contact, pairs: np.ndarray, out: np.ndarray, n: int, dmin: np.ndarray,
                nee: int, end: int) -> int:
     """The batch's pairs, in order, as :func:`_edge_edge` takes them one by one; returns the pairs
@@ -233,7 +233,7 @@ def _settle_ee(x: np.ndarray, c: Contact, pairs: np.ndarray, out: np.ndarray, n:
 _W, _PN, _PD = 0, 3, 6
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _triangles_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
     """:func:`closest_on_triangle` and the distance of each of the first ``n`` pairs of a batch,
     without branches (every region's weights computed, the one the scalar test would return
@@ -298,7 +298,7 @@ def _triangles_batch(xin: np.ndarray, out: np.ndarray, n: int) -> None:
         out[_PD * BATCH + k] = np.sqrt(nx * nx + ny * ny + nz * nz)
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _settle_pt(c: Contact, pairs: np.ndarray, out: np.ndarray, n: int, dmin: np.ndarray, npt: int, end: int) -> int:
     """The batch's pairs, in order, as :func:`_point_triangle` takes them one by one; returns the
     pairs kept."""
@@ -309,14 +309,14 @@ def _settle_pt(c: Contact, pairs: np.ndarray, out: np.ndarray, n: int, dmin: np.
     return npt
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _tested_pt(c: Contact, batch: Batch, n: int, dmin: np.ndarray, npt: int, end: int) -> int:
     # a batch of point-triangle pairs tested and taken in order (as rebuilds and moves test them)
     _triangles_batch(batch.rows, batch.results, n)
     return _settle_pt(c, batch.pairs, batch.results, n, dmin, npt, end)
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _tested_ee(x: np.ndarray, c: Contact, batch: Batch, n: int, dmin: np.ndarray, nee: int, end: int) -> int:
     # (as _tested_pt, for edge-edge pairs)
     _segments_batch(batch.rows, batch.results, n)
@@ -551,7 +551,7 @@ def join(x: np.ndarray, c: Contact, parts: int, rows: int) -> None:
     c.meta[CLAMPED] = 0
 
 
-@njit(**EXACT)
+@njit(**EXACT, **INNER)
 def _in_order(ids: np.ndarray, data: np.ndarray, n: int, width: int) -> None:
     """The first ``n`` columns of ``ids`` (2, M) (values below ``width``) and ``data`` sorted by
     ``ids[0]``, then ``ids[1]``: two stable counting sorts, the second key first."""
@@ -581,7 +581,7 @@ def _in_order(ids: np.ndarray, data: np.ndarray, n: int, width: int) -> None:
                 data[r, j] = tdata[r, j]
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _index_reference(c: Contact) -> None:
     # a new reference: every point, triangle and edge in its cell, no point held
     nb = c.near
@@ -596,7 +596,7 @@ def _index_reference(c: Contact) -> None:
     nb.ext[1] = _index_elements(x, c.edges, nb.edge_box, 0.5 * c.radius, nb.edges, keys, inv)
 
 
-@njit(**BORROWED)
+@njit(**BORROWED, **INNER)
 def _index_elements(x: np.ndarray, ids: np.ndarray, box: np.ndarray, pad: float, cells: Cells, keys: np.ndarray,
                     inv: float) -> float:
     # the elements' boxes (widened by pad) and cells; returns the largest extent

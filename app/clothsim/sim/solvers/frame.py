@@ -383,9 +383,12 @@ def _addresses(argtypes: tuple, plan_type: types.Type) -> Addresses:
     # pass (8-9 s) or else the set's two kernels (3 s), and the side kernels registered to go
     # beside (the renderer's overlap test); this one the rest (the kinds' passes 3-6 s, the
     # shared passes, the launchers, the other side kernels).
-    beside = (*(((collide_meshes_chunk, collide),) if collide is not None else sets), *side_kernels_beside())
+    # (in the contact mode the second process starts with the moves, so the set's kernels stay here)
+    sets_beside = collide is None and not contact
+    beside = (*(((collide_meshes_chunk, collide),) if collide is not None else sets if sets_beside else ()),
+              *side_kernels_beside())
     here = (*(contact[1:] if contact else ()), *(kernel for row in kinds for kernel in row),
-            *(sets if collide is not None else ()))
+            *(() if sets_beside else sets))
 
     def meanwhile() -> None:
         _shared_addresses(st)
