@@ -308,10 +308,17 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 gen = barrier(sync, size, gen, np.int64(LAP_BOUND))
                 if gen < 0:
                     return
-                if col is not None and colliding and col.moving:
+                if col is not None and col.moving:
                     # a moving collider has the last word (contactresponse.left_balls); its time
                     # goes to the colliders' lap
                     lo, hi = share(CHUNKS, member, size)
+                    if not colliding:
+                        # run on its own (profile): the colliders' box of the positions as they are now
+                        member_bounds(pos, last, col.boxes, cols, lo, hi)
+                        gen = barrier(sync, size, gen, np.int64(LAP_BOUNDS))
+                        if gen < 0:
+                            return
+                        merge_bounds(col.boxes, 0.0, box)
                     if call_native(col.sets[SET_COLLIDE], (colliders_at, col.calls, pos, last, col.free, box,
                                                            col.offset, own, np.int64(lo), np.int64(hi), skipped,
                                                            type_ref(None))) != 0:
