@@ -87,6 +87,17 @@ LAP_NAMES = ("springs and forces", "gather and Verlet", "hash: keys", "hash: slo
 CALLS = 9
 
 
+@njit(inline="always", **KERNEL)
+def _collide_items(col: tuple, colliders_at: int, pos: np.ndarray, last: np.ndarray, box: np.ndarray, own: bool,
+                   lo: int, hi: int, skipped: np.ndarray) -> None:
+    """The collider pass's work items ``lo`` to ``hi`` (a member's), the kinds' groups at the address
+    ``colliders_at``. It allocates the reach flags of a member other than the first: a failure ends
+    this member as a failed allocation of its own would."""
+    if call_native(col.sets[SET_COLLIDE], (colliders_at, col.calls, pos, last, col.free, box, col.offset, own,
+                                           np.int64(lo), np.int64(hi), skipped, type_ref(None))) != 0:
+        raise MemoryError("the collider pass could not allocate its reach flags")
+
+
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
             col: tuple | None, colliders_at: int, forces: tuple, pins: tuple | None, contact: tuple | None,
@@ -266,11 +277,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     if gen < 0:
                         return
                     merge_bounds(col.boxes, 0.0, box)
-                # (it allocates the reach flags of a member other than the first: a failure ends
-                # this member as a failed allocation of its own would)
-                if call_native(col.sets[SET_COLLIDE], (colliders_at, col.calls, pos, last, col.free, box, col.offset,
-                                                       own, np.int64(lo), np.int64(hi), skipped, type_ref(None))) != 0:
-                    raise MemoryError("the collider pass could not allocate its reach flags")
+                _collide_items(col, colliders_at, pos, last, box, own, lo, hi, skipped)
                 if member == 0:
                     st.skips[0] += skipped[0]
                 gen = barrier(sync, size, gen, np.int64(LAP_COLLIDE))
@@ -319,10 +326,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                         if gen < 0:
                             return
                         merge_bounds(col.boxes, 0.0, box)
-                    if call_native(col.sets[SET_COLLIDE], (colliders_at, col.calls, pos, last, col.free, box,
-                                                           col.offset, own, np.int64(lo), np.int64(hi), skipped,
-                                                           type_ref(None))) != 0:
-                        raise MemoryError("the collider pass could not allocate its reach flags")
+                    _collide_items(col, colliders_at, pos, last, box, own, lo, hi, skipped)
                     left_balls(pos, contact, col.free, lo, hi)
                     gen = barrier(sync, size, gen, np.int64(LAP_COLLIDE))
                     if gen < 0:
