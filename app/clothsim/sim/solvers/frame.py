@@ -98,6 +98,19 @@ def _collide_items(col: tuple, colliders_at: int, pos: np.ndarray, last: np.ndar
         raise MemoryError("the collider pass could not allocate its reach flags")
 
 
+@njit(inline="always", **KERNEL)
+def _bounds_now(pos: np.ndarray, last: np.ndarray, col: tuple, cols: np.ndarray, box: np.ndarray, lo: int, hi: int,
+                sync: np.ndarray, size: int, gen: int) -> int:
+    """The colliders' box of the positions as they are now (a pass the profile runs on its own):
+    each member's bounds over its work items ``lo`` to ``hi``, a barrier, then their merge into
+    ``box``. Returns the barrier's generation (negative when the team gave up)."""
+    member_bounds(pos, last, col.boxes, cols, lo, hi)
+    gen = barrier(sync, size, gen, np.int64(LAP_BOUNDS))
+    if gen >= 0:
+        merge_bounds(col.boxes, 0.0, box)
+    return gen
+
+
 @njit(**KERNEL)
 def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, grid: tuple | None,
             col: tuple | None, colliders_at: int, forces: tuple, pins: tuple | None, contact: tuple | None,
@@ -272,11 +285,9 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     merge_bounds(col.boxes, margin, box)
                 else:
                     # run on its own (profile): bound the positions as they are now
-                    member_bounds(pos, last, col.boxes, cols, lo, hi)
-                    gen = barrier(sync, size, gen, np.int64(LAP_BOUNDS))
+                    gen = _bounds_now(pos, last, col, cols, box, lo, hi, sync, size, gen)
                     if gen < 0:
                         return
-                    merge_bounds(col.boxes, 0.0, box)
                 _collide_items(col, colliders_at, pos, last, box, own, lo, hi, skipped)
                 if member == 0:
                     st.skips[0] += skipped[0]
@@ -321,11 +332,9 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                     lo, hi = share(CHUNKS, member, size)
                     if not colliding:
                         # run on its own (profile): the colliders' box of the positions as they are now
-                        member_bounds(pos, last, col.boxes, cols, lo, hi)
-                        gen = barrier(sync, size, gen, np.int64(LAP_BOUNDS))
+                        gen = _bounds_now(pos, last, col, cols, box, lo, hi, sync, size, gen)
                         if gen < 0:
                             return
-                        merge_bounds(col.boxes, 0.0, box)
                     _collide_items(col, colliders_at, pos, last, box, own, lo, hi, skipped)
                     left_balls(pos, contact, col.free, lo, hi)
                     gen = barrier(sync, size, gen, np.int64(LAP_COLLIDE))
