@@ -37,6 +37,12 @@ def self_collision_scene(n: int = 22, integrator: str = "verlet", damping: str =
         .with_simulation(self_collision=mode, integrator=integrator, damping_mode=damping)
 
 
+def rest_of(sim: Simulation) -> np.ndarray:
+    """The cloth's rest positions (3, N), from which the simulation made its contact group (its
+    query radius depends on the rest edges)."""
+    return np.ascontiguousarray(sim.initial_positions.T)
+
+
 def folded_cloth(frames: int = 70) -> Simulation:
     """The 20 x 20 cloth folded on the floor: from frame ``frames`` on, the first frame from whose
     positions a rebuild stores more than 10 point-triangle and 10 edge-edge pairs (which frame that
@@ -49,7 +55,7 @@ def folded_cloth(frames: int = 70) -> Simulation:
     for _ in range(60):
         x = np.ascontiguousarray(sim.positions.T)
         c = sim._kernel_args.contact
-        probe = contact_group(x, c.tris, c.movable, sim.scene.cloth.thickness)
+        probe = contact_group(rest_of(sim), c.tris, c.movable, sim.scene.cloth.thickness)
         rebuild(x, probe)
         if probe.meta[1] > 10 and probe.meta[2] > 10:
             return sim
@@ -239,6 +245,29 @@ def test_the_pass_by_pass_profile_gives_moving_colliders_the_last_word_too() -> 
     assert sim.positions[:, 1].max() <= FLOOR + SQUEEZE_GAP + 1e-9
 
 
+@pytest.mark.parametrize("n, thickness, radius, nearest", [(20, 0.0095, 0.69 / 19, None),
+                                                            (50, 0.0095, 1.5 * 0.0095, None),
+                                                            (20, 0.05, 1.5 * 0.5 / 19, 1 / 19 / np.sqrt(2))])
+def test_the_query_radius_reaches_to_just_short_of_the_sheets_own_neighbours(n: int, thickness: float, radius: float,
+                                                                             nearest: float | None) -> None:
+    # 1.5 x the contact distance, or 0.69 x the shortest rest edge where that is more (a cloth thin
+    # against its edges). The flat cloth's nearest elements that share no point lie 1/sqrt(2) edge
+    # apart: within a radius of 0.69 edge there is no pair at rest and every ball is the largest;
+    # a contact distance of half an edge reaches them (0.75 edge), and they bound every ball
+    from clothsim.sim.passes.contactgroup import FLOOR, GAMMA
+    from clothsim.sim.passes.contactsearch import rebuild
+
+    sim = Simulation(self_collision_scene(n).with_cloth(thickness=thickness))
+    c = sim._kernel_args.contact
+    assert c.radius == pytest.approx(radius, rel=1e-9)
+    rebuild(rest_of(sim), c)
+    assert int(c.meta[1]) == int(c.meta[2]) == 0  # (none within the contact distance)
+    if nearest is None:
+        assert np.allclose(np.sqrt(c.rho2), GAMMA * (c.radius - FLOOR * c.thickness), rtol=1e-9, atol=0)
+    else:  # (the scene's grid is jittered by up to a millimetre out of its plane)
+        assert np.allclose(np.sqrt(c.rho2), GAMMA * (nearest - FLOOR * c.thickness), rtol=1e-3, atol=0)
+
+
 def test_no_pair_is_held_closer_than_the_floor() -> None:
     # Two triangles, the upper one driven straight down onto the lower one, still, at every
     # rebuild: the gap shrinks by GAMMA x (gap - floor) each time, towards FLOOR x the contact
@@ -288,7 +317,7 @@ def test_the_broad_phase_finds_every_pair_brute_force_finds(frames: int) -> None
     x = np.ascontiguousarray(sim.positions.T)
     c = sim._kernel_args.contact
     rebuild(x, c)
-    want = contact_group(x, c.tris, c.movable, sim.scene.cloth.thickness)
+    want = contact_group(rest_of(sim), c.tris, c.movable, sim.scene.cloth.thickness)
     dmin = _every_pair(x, want)
     npt, nee = int(c.meta[1]), int(c.meta[2])
     assert (npt, nee) == (int(want.meta[1]), int(want.meta[2]))
@@ -315,7 +344,7 @@ def test_the_batched_tests_give_the_one_at_a_time_tests_bits() -> None:
     x = np.ascontiguousarray(sim.positions.T)
     c = sim._kernel_args.contact
     rebuild(x, c)
-    want = contact_group(x, c.tris, c.movable, sim.scene.cloth.thickness)
+    want = contact_group(rest_of(sim), c.tris, c.movable, sim.scene.cloth.thickness)
     dmin = _every_pair(x, want)
     npt, nee = int(c.meta[1]), int(c.meta[2])
     assert (npt, nee) == (int(want.meta[1]), int(want.meta[2])) and npt > 10 and nee > 10
@@ -560,14 +589,14 @@ def test_the_references_moved_point_by_point_hold_what_a_rebuild_from_them_would
     c = sim._kernel_args.contact
     nb = c.near
     inv = 1.0 / nb.cell
-    sim.step(35)
+    sim.step(45)
     checked = 0
     in_contact = 0
 
     def check() -> None:
         nonlocal checked, in_contact
         x = c.ref.copy()
-        want = contact_group(x, c.tris, c.movable, sim.scene.cloth.thickness)
+        want = contact_group(rest_of(sim), c.tris, c.movable, sim.scene.cloth.thickness)
         dmin = _every_pair(x, want)
         for ids, k, width, wants, wk in ((c.pt, int(c.meta[1]), c.tris.shape[1], want.pt, int(want.meta[1])),
                                          (c.ee, int(c.meta[2]), c.edges.shape[1], want.ee, int(want.meta[2]))):

@@ -35,6 +35,12 @@ FRICTION = 0.3
 MAX_THICKNESS_PER_EDGE = 0.5
 #: Query radius over the contact distance.
 REACH = 1.5
+#: ... or over the shortest rest edge, where that is larger: a flat grid's nearest elements that
+#: share no point lie 1/sqrt(2) edge apart (a quad's diagonal and the next quad's corner), so a
+#: cloth thin against its edges still gets balls as large as its own mesh allows. A ball never
+#: shrinks when the radius grows (a pair newly within it is further than the old radius); only
+#: the search grows (docs/history/self-collision-limits.md, 2026-12-08).
+REACH_PER_EDGE = 0.69
 #: A point about to leave its ball calls for a new reference only if its ball is at least this
 #: fraction of the largest (GAMMA x the query radius): a point held a hair from another element
 #: would otherwise rebuild every substep and gain nothing; it waits, clamped, for the next rebuild
@@ -113,7 +119,7 @@ def contact_group(pos: np.ndarray, tris: np.ndarray, movable: np.ndarray, thickn
     lengths = np.sqrt(((pos[:, edges[0]] - pos[:, edges[1]]) ** 2).sum(axis=0))
     shortest = float(lengths[lengths > 0].min()) if (lengths > 0).any() else thickness
     h = min(thickness, MAX_THICKNESS_PER_EDGE * shortest)
-    radius = REACH * h
+    radius = max(REACH * h, REACH_PER_EDGE * shortest)
     n = pos.shape[1]
     cap = 16 * n + 64
     cell = max(radius, 2.0 * float(np.median(lengths)))
