@@ -167,13 +167,11 @@ def run_simulate(args: argparse.Namespace) -> int:
         print(profiler.report())
     print(f"simulated {sim.frame} frames ({sim.frame / scene.simulation.frames_per_sec:.3f} s of cloth) "
           f"in {elapsed:.2f} s; wrote {out}", file=sys.stderr)
-    if sim.unsafe_substeps:
-        print(f"clothsim: warning: self_collision \"contact\": in {sim.unsafe_substeps} substep"
-              f"{'s' if sim.unsafe_substeps != 1 else ''} a pin moved farther than the bound allows; "
-              f"the cloth may cross itself there ({sim.crossings()} crossings at the end)", file=sys.stderr)
-    if sim.squeezed_substeps:
-        print(f"clothsim: warning: self_collision \"contact\": in {sim.squeezed_substeps} substep"
-              f"{'s' if sim.squeezed_substeps != 1 else ''} a moving collider pressed the cloth thinner than the "
-              f"bound allows; the cloth may cross itself there ({sim.crossings()} crossings at the end)",
-              file=sys.stderr)
+    crossings = None
+    for count, what in ((sim.unsafe_substeps, "a pin moved farther than the bound allows"),
+                        (sim.squeezed_substeps, "a moving collider pressed the cloth thinner than the bound allows")):
+        if count:
+            crossings = sim.crossings() if crossings is None else crossings
+            print(f"clothsim: warning: self_collision \"contact\": in {count} substep{'s' if count != 1 else ''} "
+                  f"{what}; the cloth may cross itself there ({crossings} crossings at the end)", file=sys.stderr)
     return 0

@@ -30,7 +30,7 @@ distance d each move less than d/2. In each substep:
    checked in step 1 like every other point's. In a scene whose colliders move, the collider
    pass then runs again (a moving collider may have passed over a point's reference): a point it
    puts out of its ball is counted as a squeezed substep
-   (:func:`~.contactresponse.left_balls`).
+   (:func:`~.contactreference.left_balls`).
 
 The broad phase is a dense grid of cells over the cloth's extent (:mod:`.celltables`), built at
 a rebuild only (:func:`~.contactsearch.rebuild` has the rule): the triangles' boxes, widened by the query radius,

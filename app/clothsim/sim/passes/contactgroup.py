@@ -68,7 +68,7 @@ LOCAL_SHARE = 1.0 / 128.0
 # bound has moved a point since its reference was set; REBUILDS counts the whole rebuilds, LOCALS
 # the substeps that moved some points' references, MOVED those points; SQUEEZED counts the substeps
 # in which a moving collider put a point out of its ball after the bound, SQUEEZING is 1 in such a
-# substep until it is counted: see contactresponse.left_balls)
+# substep until it is counted: see contactreference.left_balls)
 VALID, N_PT, N_EE, REBUILDS, DROPPED, UNSAFE, MOVING, CLAMPED, LOCALS, MOVED, SQUEEZING, SQUEEZED = range(12)
 META = 12
 

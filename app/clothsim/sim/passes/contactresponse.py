@@ -6,10 +6,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from ...jit import BORROWED, CHUNKS, INNER, KERNEL
-from ..team import share
-from .contactgroup import CLAMPED, FRICTION, MOVING, N_EE, N_PT, PUSH, PUSH_MOVING, SQUEEZED, SQUEEZING, \
-    SWEEPS_MOVING, Contact
+from ...jit import BORROWED, INNER, KERNEL
+from .contactgroup import CLAMPED, FRICTION, MOVING, N_EE, N_PT, PUSH, PUSH_MOVING, SWEEPS_MOVING, Contact
 
 
 @njit(inline="always", **KERNEL)
@@ -158,36 +156,3 @@ def bound(pos: np.ndarray, c: Contact) -> None:
             pos[2, p] = ref[2, p] + dz * f
             c.near.held[p] = True
             c.meta[CLAMPED] = 1
-
-
-# A moving collider gets the last word, after the bound: the bound pulls a point towards its
-# reference, which a collider that has moved since may have passed over, and a point pulled there
-# would stay on the collider's far side for good (a lid pressing a heap thinner than it can be went
-# through it, 414 of 900 points left over the lid). So in a scene whose colliders move the collider
-# pass runs again after the bound; a point it then puts outside its ball is one the bound cannot
-# hold (the collider squeezes the cloth against something), counted, never hidden. It leaves its
-# ball, so the next substep builds a new reference.
-
-
-@njit(inline="always", **KERNEL)
-def left_balls(pos: np.ndarray, c: Contact, free: np.ndarray, lo: int, hi: int) -> None:
-    """After the collider pass's work items ``lo`` to ``hi`` (of CHUNKS, over the free points
-    ``free``) ran again after the bound: flag the substep (``meta[SQUEEZING]``) when one of their
-    points is outside its ball."""
-    n = free.shape[0]
-    for k in range(share(n, lo, CHUNKS)[0], share(n, hi, CHUNKS)[0]):
-        p = free[k]
-        dx = pos[0, p] - c.ref[0, p]
-        dy = pos[1, p] - c.ref[1, p]
-        dz = pos[2, p] - c.ref[2, p]
-        if dx * dx + dy * dy + dz * dz > c.rho2[p]:
-            c.meta[SQUEEZING] = 1
-            return
-
-
-@njit(inline="always", **KERNEL)
-def count_squeezed(c: Contact) -> None:
-    """Count a substep :func:`left_balls` flagged (once, whichever members flagged it)."""
-    if c.meta[SQUEEZING] != 0:
-        c.meta[SQUEEZED] += 1
-        c.meta[SQUEEZING] = 0

@@ -19,7 +19,7 @@ from .meshsprings import mesh_limit
 from .colliders import SET_REACHABLE
 from .selfcollide import self_collide
 from .contact import contact_bound, contact_respond
-from .contactresponse import count_squeezed, left_balls
+from .contactreference import count_squeezed, left_balls
 from ..state import Corrections
 
 
@@ -87,7 +87,7 @@ def collide_again(pos: np.ndarray, last: np.ndarray, contact: tuple | None, col:
                   scratch: np.ndarray) -> None:
     """In the contact mode, when a collider moves: the collider pass again, after the bound, and
     the substep counted when it put a point out of its ball (see
-    :func:`~clothsim.sim.passes.contactresponse.left_balls`); pruned when either is off."""
+    :func:`~clothsim.sim.passes.contactreference.left_balls`); pruned when either is off."""
     if contact is None or col is None:
         return
     if col.moving:

@@ -56,9 +56,8 @@ from ..clock import substep_time
 from ..passes.pins import offset_at, pin_chunk
 from ..passes.colliders.mesh import MeshGroup, collide_meshes_chunk, collide_types
 from ..passes.contact import contact_bound, contact_joined, contact_stale
-from ..passes.contactreference import rereference
+from ..passes.contactreference import count_squeezed, left_balls, rereference
 from ..passes.contactgroup import CUT, FLAG, STALE
-from ..passes.contactresponse import count_squeezed, left_balls
 from ..passes.contactsearch import contact_search, fall_back, overflowed
 from ..passes.selfcollide import cell_keys, count_slots, grid_self_collide, place_slots, repel_slots, scatter_slots, query_share
 from ..state import Plan
@@ -327,7 +326,7 @@ def _member(member: int, size: int, steps: int, st: tuple, spec: tuple | None, g
                 if gen < 0:
                     return
                 if col is not None and col.moving:
-                    # a moving collider has the last word (contactresponse.left_balls); its time
+                    # a moving collider has the last word (contactreference.left_balls); its time
                     # goes to the colliders' lap
                     lo, hi = share(CHUNKS, member, size)
                     if not colliding:
